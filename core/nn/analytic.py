@@ -1,0 +1,80 @@
+"""Analytic signed distance to bounding boxes (paper Sec. 3.2, eq. 4).
+
+Far from the body (outside every part box B_k) VolumetricSMPL returns the distance to the union
+of the boxes instead of querying the network. Boxes are axis-aligned in their part's canonical
+frame; a part frame is placed rigidly in the world by G_k, so distances computed in the part frame
+equal world distances.
+"""
+from __future__ import annotations
+
+from typing import Tuple
+
+import torch
+
+
+def box_sdf(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor) -> torch.Tensor:
+    """Exact signed distance to an axis-aligned box (negative inside, zero on the surface).
+
+    Args:
+        x_local: (..., 3) points in the box's frame.
+        box_min: (..., 3) lower corner (broadcastable against ``x_local``).
+        box_max: (..., 3) upper corner, >= box_min.
+    Returns:
+        (...) signed distance. Outside: Euclidean distance to the box; inside: minus the distance
+        to the closest face. Differentiable everywhere except on the box's medial planes/surface
+        (the gradient there is one of the one-sided ones, never NaN).
+    """
+    center = 0.5 * (box_min + box_max)
+    half = 0.5 * (box_max - box_min)
+    q = (x_local - center).abs() - half                                # (..., 3)
+    sq = q.clamp(min=0.0).square().sum(-1)
+    # sqrt has an infinite derivative at 0: evaluate it only where the point is strictly outside.
+    pos = sq > 0
+    outside = torch.where(pos, torch.sqrt(torch.where(pos, sq, torch.ones_like(sq))), torch.zeros_like(sq))
+    inside = q.amax(dim=-1).clamp(max=0.0)
+    return outside + inside
+
+
+def transform_points(T: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """Apply 4x4 transforms to points.
+
+    Args:
+        T: (B, K, 4, 4) homogeneous transforms.
+        x: (B, N, 3) points.
+    Returns:
+        (B, K, N, 3) with out[b, k, n] = (T[b, k] @ [x[b, n], 1])[:3].
+    """
+    R = T[..., :3, :3]                                                  # (B, K, 3, 3)
+    t = T[..., :3, 3]                                                   # (B, K, 3)
+    return torch.einsum("bkij,bnj->bkni", R, x) + t[:, :, None, :]
+
+
+def union_box_sdf(x: torch.Tensor, G_inv: torch.Tensor, box_min: torch.Tensor,
+                  box_max: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor]:
+    """Signed distance to the union of K rigidly placed boxes, and box membership.
+
+    The distance is min_k box_sdf(G_inv[k] x, box_k). Outside all boxes this is the exact
+    distance to the union; inside the union it is only a bound (VolumetricSMPL uses the neural
+    SDF there, eq. 3).
+
+    Args:
+        x: (B, N, 3) world points.
+        G_inv: (B, K, 4, 4) rigid world->part transforms (inverse bone transforms G_k^-1).
+        box_min: (B, K, 3) box lower corners in part frames.
+        box_max: (B, K, 3) box upper corners in part frames.
+    Returns:
+        sdf: (B, N) signed distance to the union of boxes.
+        inside: (B, K, N) bool, True where point n lies in (or on) box k.
+    """
+    if x.dim() != 3 or x.shape[-1] != 3:
+        raise ValueError(f"union_box_sdf: x must be (B, N, 3), got {tuple(x.shape)}")
+    B, K = G_inv.shape[:2]
+    if G_inv.shape != (B, K, 4, 4) or x.shape[0] != B:
+        raise ValueError(f"union_box_sdf: G_inv must be (B, K, 4, 4) with B={x.shape[0]} matching x, "
+                         f"got {tuple(G_inv.shape)}")
+    if box_min.shape != (B, K, 3) or box_max.shape != (B, K, 3):
+        raise ValueError(f"union_box_sdf: box_min/box_max must be (B, K, 3) = {(B, K, 3)}, "
+                         f"got {tuple(box_min.shape)} and {tuple(box_max.shape)}")
+    x_local = transform_points(G_inv, x)                               # (B, K, N, 3)
+    d = box_sdf(x_local, box_min[:, :, None, :], box_max[:, :, None, :])  # (B, K, N)
+    return d.amin(dim=1), d <= 0

@@ -1,0 +1,81 @@
+"""Hyperparameters of the VolumetricSMPL network (paper Sec. 3 and supplementary A.1).
+
+The defaults are the paper's values; a :class:`VolumeConfig` is stored in every checkpoint
+(``to_dict``) and rebuilt on load (``from_dict``).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Dict, Tuple
+
+
+@dataclass
+class VolumeConfig:
+    """Architecture of encoder + Neural Blend Weights (NBW) + SDF decoder.
+
+    Attributes:
+        latent_dim: size of the per-part shape code z_k (A.1: 128).
+        encoder_hidden: width of the shared ResNet-PointNet encoder (A.1: 128).
+        encoder_blocks: number of ResNet blocks in the encoder (A.1: 4).
+        n_surface_samples: points sampled per body part fed to the encoder (A.1: 1k).
+        decoder_hidden: width of the SDF decoder (A.1: 64).
+        decoder_layers: number of linear layers in the decoder, output layer included (A.1: 7).
+        skip_layers: indices of decoder layers whose input is concatenated with the decoder
+            input [gamma(x_k), z_k] (A.1: the 3rd layer).
+        pe_levels: positional-encoding frequency levels of the query point (A.1: 2).
+        nbw_rank: number R of blended shape matrices per layer (Sec. 3.3: 80).
+        box_padding: relative padding of each part's bounding box (Sec. 3.1: 12.5%).
+    """
+
+    latent_dim: int = 128
+    encoder_hidden: int = 128
+    encoder_blocks: int = 4
+    n_surface_samples: int = 1000
+    decoder_hidden: int = 64
+    decoder_layers: int = 7
+    skip_layers: Tuple[int, ...] = (3,)
+    pe_levels: int = 2
+    nbw_rank: int = 80
+    box_padding: float = 0.125
+
+    def __post_init__(self):
+        self.skip_layers = tuple(int(s) for s in self.skip_layers)
+        positive = ("latent_dim", "encoder_hidden", "encoder_blocks", "n_surface_samples",
+                    "decoder_hidden", "decoder_layers")
+        for name in positive:
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 1:
+                raise ValueError(f"VolumeConfig.{name} must be a positive integer, got {v!r}")
+        for name in ("pe_levels", "nbw_rank"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+                raise ValueError(f"VolumeConfig.{name} must be a non-negative integer, got {v!r}")
+        for s in self.skip_layers:
+            if not 0 < s < self.decoder_layers:
+                raise ValueError(
+                    f"VolumeConfig.skip_layers entry {s} is out of range: skip connections go into "
+                    f"layers 1..{self.decoder_layers - 1} (decoder_layers={self.decoder_layers})")
+        if not float(self.box_padding) >= 0.0:
+            raise ValueError(f"VolumeConfig.box_padding must be >= 0, got {self.box_padding!r}")
+        self.box_padding = float(self.box_padding)
+
+    def to_dict(self) -> Dict[str, Any]:
+        """JSON-safe dict (tuples become lists)."""
+        d = dataclasses.asdict(self)
+        d["skip_layers"] = list(self.skip_layers)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Dict[str, Any]) -> "VolumeConfig":
+        """Inverse of :meth:`to_dict`. Missing keys take the defaults; unknown keys are an error."""
+        if not isinstance(d, dict):
+            raise TypeError(f"VolumeConfig.from_dict expects a dict, got {type(d).__name__}")
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(
+                f"unknown VolumeConfig key(s) {unknown}; valid keys are {sorted(known)}. "
+                "The config was probably written by a different volsmpl version: remove these keys "
+                "or upgrade volsmpl.")
+        return cls(**d)

@@ -1,0 +1,83 @@
+"""Shared ResNet-PointNet encoder of body-part point clouds (paper A.1, as in COAP/ONet).
+
+Architecture (hidden width h, latent size c):
+
+    input linear 3 -> 2h
+    for each of the n ResNet blocks:
+        block: 2h -> h   (two linear layers fc_0: 2h->h, fc_1: h->h with pre-ReLU,
+                          plus a linear skip 2h->h; output = skip(x) + fc_1(relu(fc_0(relu(x)))))
+        between blocks: concat(per-point feature, max over points) -> 2h
+    max-pool over points, ReLU, output linear h -> c
+
+Every block therefore sees both the point's own feature and a global summary of the part.
+"""
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+
+class ResnetBlockFC(nn.Module):
+    """Pre-activation fully connected ResNet block: (..., d_in) -> (..., d_out)."""
+
+    def __init__(self, d_in: int, d_out: int, d_hidden: int | None = None):
+        super().__init__()
+        d_hidden = d_out if d_hidden is None else d_hidden
+        self.fc_0 = nn.Linear(d_in, d_hidden)
+        self.fc_1 = nn.Linear(d_hidden, d_out)
+        self.shortcut = nn.Linear(d_in, d_out, bias=False) if d_in != d_out else None
+        # Start as (linear) identity through the skip path: the residual branch is zero.
+        nn.init.zeros_(self.fc_1.weight)
+        nn.init.zeros_(self.fc_1.bias)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        dx = self.fc_1(torch.relu(self.fc_0(torch.relu(x))))
+        xs = x if self.shortcut is None else self.shortcut(x)
+        return xs + dx
+
+
+class ResnetPointNet(nn.Module):
+    """Permutation-invariant point-cloud encoder.
+
+    Args:
+        latent_dim: output code size c (paper: 128).
+        hidden: width h (paper: 128).
+        n_blocks: number of ResNet blocks (paper: 4).
+        in_dim: point dimension (3).
+    """
+
+    def __init__(self, latent_dim: int = 128, hidden: int = 128, n_blocks: int = 4, in_dim: int = 3):
+        super().__init__()
+        if n_blocks < 1:
+            raise ValueError(f"ResnetPointNet needs at least one ResNet block, got n_blocks={n_blocks}")
+        self.in_dim = in_dim
+        self.latent_dim = latent_dim
+        self.fc_pos = nn.Linear(in_dim, 2 * hidden)
+        self.blocks = nn.ModuleList([ResnetBlockFC(2 * hidden, hidden) for _ in range(n_blocks)])
+        self.fc_c = nn.Linear(hidden, latent_dim)
+
+    @classmethod
+    def from_config(cls, cfg) -> "ResnetPointNet":
+        """Build from a :class:`volsmpl.nn.config.VolumeConfig`."""
+        return cls(cfg.latent_dim, cfg.encoder_hidden, cfg.encoder_blocks)
+
+    def forward(self, points: torch.Tensor) -> torch.Tensor:
+        """Encode point clouds.
+
+        Args:
+            points: (N, P, 3) N clouds of P >= 1 points each (e.g. N = bodies * parts).
+        Returns:
+            (N, latent_dim) codes, invariant to the order of the P points.
+        """
+        if points.dim() != 3 or points.shape[-1] != self.in_dim:
+            raise ValueError(f"ResnetPointNet expects points of shape (N, P, {self.in_dim}), "
+                             f"got {tuple(points.shape)}")
+        if points.shape[1] == 0:
+            raise ValueError("ResnetPointNet got empty point clouds (P = 0); sample at least one point per part")
+        net = self.fc_pos(points)                                       # (N, P, 2h)
+        for i, block in enumerate(self.blocks):
+            if i > 0:
+                pooled = net.amax(dim=1, keepdim=True).expand_as(net)
+                net = torch.cat([net, pooled], dim=-1)                  # (N, P, 2h)
+            net = block(net)                                            # (N, P, h)
+        return self.fc_c(torch.relu(net.amax(dim=1)))                   # (N, c)
