@@ -1,0 +1,62 @@
+"""Geometry of rigidly placed part boxes: containment, pairwise overlap (exact SAT test) and
+uniform sampling of box overlaps (for the self-penetration loss, paper eq. 5 / supp. C.4)."""
+from __future__ import annotations
+
+import torch
+
+
+def inside_boxes(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor) -> torch.Tensor:
+    """x_local (B, K, N, 3) in part frames, box_min/max (B, K, 3) -> (B, K, N) bool (closed boxes)."""
+    return ((x_local >= box_min[:, :, None]) & (x_local <= box_max[:, :, None])).all(dim=-1)
+
+
+def obb(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
+    """World-frame oriented boxes: centres (..., 3), axes (..., 3, 3) as columns, half extents (..., 3)."""
+    c_local = 0.5 * (box_min + box_max)
+    centre = (G[..., :3, :3] @ c_local[..., None])[..., 0] + G[..., :3, 3]
+    return centre, G[..., :3, :3], 0.5 * (box_max - box_min)
+
+
+def boxes_overlap(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor, eps: float = 1e-9) -> torch.Tensor:
+    """Exact pairwise overlap test of oriented boxes by the separating axis theorem (15 axes).
+
+    Args: G (B, K, 4, 4) part-to-world; box_min/max (B, K, 3) in part frames.
+    Returns: (B, K, K) bool, symmetric, True where two boxes intersect (touching counts).
+    """
+    c, R, h = obb(G, box_min, box_max)
+    B, K = c.shape[:2]
+    Ra, Rb = R[:, :, None], R[:, None, :]  # (B,K,1,3,3), (B,1,K,3,3)
+    ha, hb = h[:, :, None], h[:, None, :]
+    d = c[:, None, :] - c[:, :, None]  # (B,K,K,3) centre of b minus centre of a
+    ea, eb = Ra.expand(B, K, K, 3, 3).transpose(-1, -2), Rb.expand(B, K, K, 3, 3).transpose(-1, -2)  # rows = axes
+    cross = torch.linalg.cross(ea[..., :, None, :].expand(-1, -1, -1, 3, 3, -1), eb[..., None, :, :].expand(-1, -1, -1, 3, 3, -1))
+    axes = torch.cat([ea, eb, cross.reshape(B, K, K, 9, 3)], dim=3)  # (B,K,K,15,3)
+    proj_a = (torch.einsum("bklsc,bklic->bklsi", axes, ea).abs() * ha[..., None, :]).sum(-1)
+    proj_b = (torch.einsum("bklsc,bklic->bklsi", axes, eb).abs() * hb[..., None, :]).sum(-1)
+    dist = torch.einsum("bklsc,bklc->bkls", axes, d).abs()
+    degenerate = axes.norm(dim=-1) < 1e-6  # parallel edges give a zero cross product: not a separating axis
+    separated = (dist > proj_a + proj_b + eps) & ~degenerate
+    return ~separated.any(dim=-1)
+
+
+def sample_overlaps(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor, pairs: torch.Tensor,
+                    n_points: int = 300, generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Uniform samples in the overlap of box pairs of one body (COAP's procedure): n_points uniform in
+    each box of the pair, kept when inside the other box.
+
+    Args: G (K, 4, 4); box_min/max (K, 3); pairs (P, 2) part ids.
+    Returns: points (M, 3) world frame (no gradient), pair_id (M,) index into pairs.
+    """
+    dev, dt = G.device, G.dtype
+    if pairs.numel() == 0:
+        return torch.zeros(0, 3, dtype=dt, device=dev), torch.zeros(0, dtype=torch.long, device=dev)
+    with torch.no_grad():
+        src, dst = torch.cat([pairs[:, 0], pairs[:, 1]]), torch.cat([pairs[:, 1], pairs[:, 0]])
+        pid = torch.arange(pairs.shape[0], device=dev).repeat(2)
+        u = torch.rand(src.shape[0], n_points, 3, generator=generator, dtype=dt, device=dev if generator is None else generator.device)
+        u = u.to(dev)
+        local = box_min[src, None] + u * (box_max[src] - box_min[src])[:, None]
+        world = (G[src, None, :3, :3] @ local[..., None])[..., 0] + G[src, None, :3, 3]
+        other = (G[dst, None, :3, :3].transpose(-1, -2) @ (world - G[dst, None, :3, 3])[..., None])[..., 0]
+        keep = ((other >= box_min[dst, None]) & (other <= box_max[dst, None])).all(-1)
+        return world[keep], pid[:, None].expand(-1, n_points)[keep]

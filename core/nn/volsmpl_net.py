@@ -1,0 +1,54 @@
+"""The VolumetricSMPL network: shared ResNet-PointNet part encoder + NBW-generated SDF decoders.
+
+Body-agnostic: K (number of parts) comes from the body's partition, the rest from VolumeConfig.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import torch
+from torch import nn
+
+from .config import VolumeConfig
+from .nbw import NBWDecoder, NBWWeights
+from .pointnet import ResnetPointNet
+
+
+class PartCode(NamedTuple):
+    """Encoding of B bodies: z (B, K, latent) and the decoder weights generated from it."""
+
+    z: torch.Tensor
+    weights: NBWWeights
+
+
+class VolumetricSMPLNet(nn.Module):
+    """Encoder + NBW decoder.
+
+    Args:
+        num_parts: K.
+        config: VolumeConfig (paper defaults).
+    """
+
+    kind = "volsmpl"
+    output = "sdf"
+
+    def __init__(self, num_parts: int, config: VolumeConfig | None = None):
+        super().__init__()
+        self.config = config or VolumeConfig()
+        self.num_parts = num_parts
+        self.encoder = ResnetPointNet.from_config(self.config)
+        self.decoder = NBWDecoder.from_config(self.config, num_parts, share_shapes=getattr(self.config, "nbw_shared_shapes", True))
+
+    def encode(self, local_surface: torch.Tensor) -> PartCode:
+        """local_surface (B, K, P, 3) part surface samples in part frames -> PartCode."""
+        B, K, P, _ = local_surface.shape
+        z = self.encoder(local_surface.reshape(B * K, P, 3)).reshape(B, K, -1)
+        return PartCode(z, self.decoder.generate(z))
+
+    def decode_dense(self, x_local: torch.Tensor, code: PartCode) -> torch.Tensor:
+        """x_local (B, K, N, 3) -> (B, K, N): every part's decoder on every point."""
+        return self.decoder.decode_dense(x_local, code.weights)
+
+    def decode_pairs(self, x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor, code: PartCode) -> torch.Tensor:
+        """x_local (M, 3) in the frame of part part_idx of body body_idx -> (M,)."""
+        return self.decoder.decode_pairs(x_local, body_idx, part_idx, code.weights)

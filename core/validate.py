@@ -1,0 +1,35 @@
+"""Input checks shared by every query: one clear message per user error, nothing silently fixed."""
+from __future__ import annotations
+
+import torch
+
+
+def check_points(points, like: torch.Tensor) -> torch.Tensor:
+    """Validate query points against a body output's vertices.
+
+    Args:
+        points: (B, N, 3), or (N, 3) shared by all B bodies (expanded, no copy).
+        like: out.vertices (B, V, 3): fixes B, dtype and device.
+    Returns:
+        (B, N, 3) points.
+    """
+    B = like.shape[0]
+    if not torch.is_tensor(points):
+        raise TypeError(f"points must be a torch.Tensor of shape (B, N, 3) or (N, 3), got {type(points).__name__}")
+    if points.ndim == 2 and points.shape[-1] == 3:
+        points = points[None].expand(B, -1, -1)
+    if points.ndim != 3 or points.shape[-1] != 3:
+        raise ValueError(f"points must have shape (B, N, 3) or (N, 3), got {tuple(points.shape)}")
+    if points.shape[0] != B:
+        raise ValueError(f"points are for {points.shape[0]} bodies but the body output has {B}; pass (B={B}, N, 3), "
+                         f"or (N, 3) to query the same points on every body.")
+    if not points.is_floating_point():
+        raise TypeError(f"points must be floating point, got {points.dtype}; convert with points.to({like.dtype}).")
+    if points.dtype != like.dtype:
+        raise TypeError(f"points are {points.dtype} but the body output is {like.dtype}; convert with points.to({like.dtype}).")
+    if points.device != like.device:
+        raise ValueError(f"points are on {points.device} but the body output is on {like.device}; move them with points.to('{like.device}').")
+    bad = ~torch.isfinite(points).all(dim=-1)
+    if bad.any():
+        raise ValueError(f"points contain NaN or Inf ({int(bad.sum())} of {bad.numel()} points); remove or fix them before querying.")
+    return points

@@ -1,0 +1,304 @@
+"""`attach_volume(body)` and `Volume`: the public VolumetricSMPL API attached to a body model.
+
+    body = volsmpl.create_body()            # or smplx.create(...) SMPL / SMPL-H / SMPL-X
+    volsmpl.attach_volume(body)
+    out = body(betas=..., body_pose=..., global_orient=..., transl=...)
+    sdf = body.volume.query(out, points)                    # (B, N), metres, negative inside
+    part_sdf = body.volume.query_parts(out, points)         # (B, K, N)
+    loss = body.volume.collision_loss(out, points)
+    loss = body.volume.selfpen_loss(out)                    # (B,)
+    mesh = body.volume.extract_mesh(out, resolution=128)
+
+Data flow: body output -> partition (G_k, padded boxes, part surface samples) -> PointNet z_k ->
+NBW decoder weights (cached per body output) -> query: points to part frames, cull by boxes,
+tiny decoders only on (point, part) pairs inside boxes (or densely, the reference path),
+min over parts; points in no box get the analytic box SDF (paper eq. 4).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from .body.fingerprint import fingerprint_of_model
+from .boxes import boxes_overlap, inside_boxes, sample_overlaps
+from .checkpoint import load_checkpoint
+from .nn.analytic import box_sdf
+from .nn.config import VolumeConfig
+from .nn.volsmpl_net import PartCode, VolumetricSMPLNet
+from .partition import Partition
+from .validate import check_points
+
+ASSETS = Path(__file__).resolve().parent / "assets"
+DEFAULT_CHECKPOINTS = {"volsmpl": ASSETS / "volsmpl_anny", "coap": ASSETS / "coap_anny"}
+
+
+@dataclass
+class Encoding:
+    """Per-forward-output body encoding. G (B, K, 4, 4) part-to-world; box_min/max (B, K, 3) padded
+    boxes in part frames; code: PartCode (z_k and generated decoder weights)."""
+
+    G: torch.Tensor
+    box_min: torch.Tensor
+    box_max: torch.Tensor
+    code: PartCode
+    stamp: tuple
+    ref: tuple | None = None  # detached (vertices, joints, full_pose) of a constant output, for value reuse
+
+
+def _stamp(out) -> tuple:
+    return tuple((t.data_ptr(), t._version, tuple(t.shape), t.dtype, t.device) for t in (out.vertices, out.joints, out.full_pose))
+
+
+class Volume(torch.nn.Module):
+    """Volumetric (SDF) extension of one body model; see the module docstring.
+
+    Args:
+        body: the body model it is attached to (volsmpl.Body or smplx SMPL/SMPL-H/SMPL-X).
+        net: the network (VolumetricSMPLNet).
+        dense: evaluate every part decoder on every point (reference path) instead of only the
+            (point, part) pairs inside part boxes (default, same values and gradients).
+        chunk_elems: memory budget of one query chunk in (body, part, point) entries.
+    """
+
+    def __init__(self, body, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
+                 dense: bool = False, chunk_elems: int = 1 << 21):
+        super().__init__()
+        self.net = net
+        self.partition = partition
+        self.fingerprint = fingerprint
+        self.dense = dense
+        self.chunk_elems = int(chunk_elems)
+        self._last: Encoding | None = None
+        self.decoder_evaluations = 0  # (point, part) decoder evaluations so far, for tests and benchmarks
+
+    @property
+    def num_parts(self) -> int:
+        return self.partition.num_parts
+
+    # ------------------------------------------------------------------ encoding
+    def encode(self, out, generator: torch.Generator | None = None) -> Encoding:
+        """Encode a body output (B bodies); cached on the output and reused while its tensors are unchanged.
+
+        Args:
+            out: body forward output with vertices (B, V, 3), joints (B, >=J, 3), full_pose (B, J*3).
+            generator: draw fresh surface samples (training augmentation) instead of the fixed set; not cached.
+        """
+        for name in ("vertices", "joints", "full_pose"):
+            if not torch.is_tensor(getattr(out, name, None)):
+                raise TypeError(f"expected a body forward output with tensor '{name}' (call body(...) first), got {type(out).__name__}")
+        use_cache = generator is None and not self.training
+        stamp = _stamp(out)
+        if use_cache:
+            cached = getattr(out, "_volsmpl_encoding", None)
+            if cached is not None and cached[0] is self and cached[1].stamp == stamp:
+                return cached[1]
+            last, no_grad = self._last, not (out.vertices.requires_grad or out.joints.requires_grad)
+            if no_grad and last is not None and last.ref[0].shape == out.vertices.shape and all(
+                    torch.equal(a, b) for a, b in zip(last.ref, (out.vertices, out.joints, out.full_pose))):
+                return last  # same pose, shape and translation as the previous constant output
+        enc = self._encode(out, generator)
+        if use_cache:
+            try:
+                out._volsmpl_encoding = (self, enc)
+            except AttributeError:  # outputs that take no attributes are re-encoded on every call
+                pass
+            if not (out.vertices.requires_grad or out.joints.requires_grad):
+                enc.ref = (out.vertices.detach(), out.joints.detach(), out.full_pose.detach())
+                self._last = enc
+        return enc
+
+    def _encode(self, out, generator) -> Encoding:
+        v, dtype = out.vertices, out.vertices.dtype
+        if v.ndim != 3 or v.shape[-1] != 3:
+            raise ValueError(f"out.vertices must be (B, V, 3), got {tuple(v.shape)}")
+        p = self.partition
+        if p.faces.device != v.device or next(self.net.parameters()).dtype != dtype:
+            raise ValueError(f"the body output is {dtype} on {v.device} but the volume is "
+                             f"{next(self.net.parameters()).dtype} on {p.faces.device}; move it with body.volume.to(device, dtype).")
+        G = p.part_transforms(out.full_pose, out.joints)
+        box_min, box_max = p.boxes(v, G)
+        surf = p.surface_points(v, generator)  # (B, K, n, 3)
+        R, t = G[..., :3, :3], G[..., :3, 3]
+        local = torch.einsum("bkji,bknj->bkni", R, surf - t[:, :, None])
+        return Encoding(G=G, box_min=box_min, box_max=box_max, code=self.net.encode(local), stamp=_stamp(out))
+
+    # ------------------------------------------------------------------ evaluation core
+    def _part_values(self, enc: Encoding, points: torch.Tensor, dense: bool):
+        """points (B, N, 3) -> part (B, K, N) (decoder inside the part box, box SDF outside), inside (B, K, N)."""
+        x_local = Partition.canonicalize(points, enc.G)
+        inside = inside_boxes(x_local, enc.box_min, enc.box_max)
+        box = box_sdf(x_local, enc.box_min[:, :, None], enc.box_max[:, :, None])
+        if dense:
+            self.decoder_evaluations += x_local.shape[0] * x_local.shape[1] * x_local.shape[2]
+            return torch.where(inside, self.net.decode_dense(x_local, enc.code), box), inside
+        b, k, n = inside.nonzero(as_tuple=True)
+        self.decoder_evaluations += b.numel()
+        vals = self.net.decode_pairs(x_local[b, k, n], b, k, enc.code)
+        return box.index_put((b, k, n), vals), inside
+
+    def _chunks(self, B: int, N: int):
+        step = max(1024, self.chunk_elems // max(1, B * self.num_parts))
+        return [(s, min(N, s + step)) for s in range(0, N, step)]
+
+    # ------------------------------------------------------------------ public queries
+    def query_parts(self, out, points: torch.Tensor, dense: bool | None = None) -> torch.Tensor:
+        """Per-part signed distance: part k's decoder where the point is in part k's padded box,
+        the exact distance to that box elsewhere (positive).
+
+        Args: out: body output (B bodies); points: (B, N, 3) or (N, 3) shared by all bodies.
+        Returns: (B, K, N).
+        """
+        enc = self.encode(out)
+        points = check_points(points, out.vertices)
+        dense = self.dense if dense is None else dense
+        B, N = points.shape[:2]
+        parts = [self._part_values(enc, points[:, s:e], dense)[0] for s, e in self._chunks(B, N)]
+        return torch.cat(parts, dim=2) if parts else points.new_zeros(B, self.num_parts, 0)
+
+    def query(self, out, points: torch.Tensor, dense: bool | None = None) -> torch.Tensor:
+        """Signed distance to the body surface (metres, negative inside), paper eq. 4.
+
+        Points inside at least one padded part box get min over those parts' decoders; the others
+        get the analytic distance to the union of boxes (no network evaluation).
+        Args: out: body output (B bodies); points: (B, N, 3) or (N, 3) shared by all bodies.
+        Returns: (B, N); an empty (B, 0) for N = 0.
+        """
+        enc = self.encode(out)
+        points = check_points(points, out.vertices)
+        dense = self.dense if dense is None else dense
+        B, N = points.shape[:2]
+        res = []
+        for s, e in self._chunks(B, N):
+            part, inside = self._part_values(enc, points[:, s:e], dense)
+            implicit = torch.where(inside, part, torch.full_like(part, float("inf"))).amin(dim=1)
+            res.append(torch.where(inside.any(dim=1), implicit, part.amin(dim=1)))
+        return torch.cat(res, dim=1) if res else points.new_zeros(B, 0)
+
+    def collision_loss(self, out, points: torch.Tensor, reduction: str = "mean") -> torch.Tensor:
+        """Penetration of points into the bodies: ReLU(-sdf).
+
+        reduction: 'mean' (scalar over all bodies and points), 'sum' (per body, (B,)) or 'none' ((B, N)).
+        """
+        if reduction not in ("mean", "sum", "none"):
+            raise ValueError(f"reduction must be 'mean', 'sum' or 'none', got {reduction!r}")
+        pen = torch.relu(-self.query(out, points))
+        if reduction == "none":
+            return pen
+        if reduction == "sum":
+            return pen.sum(dim=1)
+        return pen.mean() if pen.numel() else pen.sum()
+
+    def selfpen_loss(self, out, n_points: int = 300, generator: torch.Generator | None = None,
+                     return_points: bool = False):
+        """Self-penetration loss (paper eq. 5, supplementary C.4), per body.
+
+        1. Find intersecting padded part boxes (exact oriented-box test), skipping kinematically
+           adjacent parts and COAP's ignored pairs (partition.collision_mask).
+        2. Sample n_points uniformly in each box of an intersecting pair, keep those inside the other box.
+        3. Keep samples inside at least two parts that may collide, by the part-wise SDF (< 0).
+        4. loss = sum over kept samples and over the colliding parts containing them of sigmoid(-d_k(x)):
+           the paper's sigma(f(x)) with f read as positive inside (our SDF is negative inside), so that
+           minimising it pushes the parts apart.
+        Returns: loss (B,); with return_points also a list of B tensors (M_b, 3) of kept samples.
+        """
+        enc = self.encode(out)
+        B, K = enc.G.shape[:2]
+        mask = self.partition.collision_mask
+        with torch.no_grad():
+            overl = boxes_overlap(enc.G, enc.box_min, enc.box_max) & mask
+        cands = []
+        for b in range(B):
+            pairs = torch.triu(overl[b]).nonzero()
+            pts, _ = sample_overlaps(enc.G[b].detach(), enc.box_min[b].detach(), enc.box_max[b].detach(), pairs, n_points, generator)
+            cands.append(pts)
+        M = max([c.shape[0] for c in cands] + [0])
+        losses, kept = [], []
+        if M == 0:
+            zero = out.vertices.sum() * 0  # keeps the graph (and device/dtype)
+            return (zero.expand(B).clone(), [c for c in cands]) if return_points else zero.expand(B).clone()
+        far = out.vertices.detach().amax(dim=(0, 1)) + 10.0  # padding point outside every box: no network cost
+        padded = far.expand(B, M, 3).clone()
+        for b, c in enumerate(cands):
+            padded[b, : c.shape[0]] = c
+        part, _ = self._part_values(enc, padded, self.dense)  # (B, K, M)
+        occ = (part < 0).to(part.dtype)
+        partner = torch.einsum("kl,blm->bkm", mask.to(part.dtype), occ) > 0  # part k has a colliding partner occupied
+        involved = (occ > 0) & partner
+        for b in range(B):
+            n = cands[b].shape[0]
+            inv = involved[b, :, :n]
+            losses.append((torch.sigmoid(-part[b, :, :n]) * inv).sum())
+            kept.append(cands[b][inv.any(dim=0)])
+        loss = torch.stack(losses)
+        return (loss, kept) if return_points else loss
+
+    @torch.no_grad()
+    def extract_mesh(self, out, resolution: int = 128, body_index: int = 0, padding: float = 0.05):
+        """Marching cubes of the learned SDF's zero level set of one body, as a trimesh.Trimesh."""
+        import trimesh
+        from skimage.measure import marching_cubes
+
+        if resolution < 8:
+            raise ValueError(f"resolution={resolution} is too coarse; use at least 8 (128 recommended).")
+        v = out.vertices[body_index].detach()
+        lo, hi = v.amin(0) - padding, v.amax(0) + padding
+        axes = [torch.linspace(float(lo[i]), float(hi[i]), resolution, dtype=v.dtype, device=v.device) for i in range(3)]
+        grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), dim=-1).reshape(-1, 3)
+        sub = _select(out, body_index)
+        sdf = self.query(sub, grid[None])[0].reshape(resolution, resolution, resolution).cpu().numpy()
+        if not (sdf.min() < 0 < sdf.max()):
+            raise RuntimeError("the SDF has no zero crossing in the body's box: the model is untrained or broken.")
+        spacing = ((hi - lo) / (resolution - 1)).cpu().numpy()
+        verts, faces, _, _ = marching_cubes(sdf, level=0.0, spacing=tuple(spacing))
+        return trimesh.Trimesh(verts + lo.cpu().numpy(), faces[:, ::-1], process=False)
+
+
+def _select(out, b: int):
+    """A view of one body of a batched output with the fields the volume reads."""
+    class _One:
+        pass
+    one = _One()
+    for name in ("vertices", "joints", "full_pose"):
+        setattr(one, name, getattr(out, name)[b:b + 1])
+    return one
+
+
+def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool = True, model: str = "volsmpl",
+                  config: VolumeConfig | None = None, dense: bool = False):
+    """Attach a volumetric model as `body.volume` (and return it).
+
+    Args:
+        body: volsmpl.Body or smplx SMPL / SMPL-H / SMPL-X model.
+        checkpoint: trained weights (path with or without .safetensors); default: the shipped checkpoint
+            for the default body.
+        pretrained: False gives randomly initialised weights (tests, or the start of training).
+        model: 'volsmpl' (only model so far).
+        config: architecture for pretrained=False (checkpoints carry their own).
+        dense: use the dense reference query path.
+    """
+    if model != "volsmpl":
+        raise ValueError(f"unknown model {model!r}; available: 'volsmpl'.")
+    fp = fingerprint_of_model(body)
+    meta = {}
+    if pretrained:
+        path = Path(checkpoint) if checkpoint is not None else DEFAULT_CHECKPOINTS[model]
+        if checkpoint is None and not Path(str(path) + ".safetensors").exists():
+            raise FileNotFoundError(
+                f"no trained {model} checkpoint ships for this body (fingerprint {fp}). Train one with "
+                f"`volsmpl train` and pass checkpoint=PATH, or use attach_volume(body, pretrained=False) for random weights.")
+        state, cfg_dict, meta = load_checkpoint(path, expected_fingerprint=fp)
+        config = VolumeConfig.from_dict(cfg_dict)
+    config = config or VolumeConfig()
+    partition = Partition(body, n_samples=config.n_surface_samples, box_padding=config.box_padding)
+    net = VolumetricSMPLNet(partition.num_parts, config)
+    if pretrained:
+        net.load_state_dict(state)
+    dev = body.v_template.device
+    volume = Volume(body, net, partition, fp, dense=dense).to(dev)
+    volume.meta = meta
+    volume.eval()
+    # plain attribute, not a submodule: body.to(...) does not move the volume (use body.volume.to(...))
+    object.__setattr__(body, "volume", volume)
+    return volume

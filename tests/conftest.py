@@ -1,0 +1,39 @@
+"""Shared fixtures: the default body, a small random-weight volume, random poses."""
+from __future__ import annotations
+
+import pytest
+import torch
+
+import volsmpl
+from volsmpl.nn.config import VolumeConfig
+
+torch.set_num_threads(2)
+
+
+def pytest_collection_modifyitems(config, items):
+    from volsmpl.volume import DEFAULT_CHECKPOINTS
+    has_ckpt = DEFAULT_CHECKPOINTS["volsmpl"].with_suffix(".safetensors").exists()
+    for item in items:
+        if "needs_checkpoint" in item.keywords and not has_ckpt:
+            item.add_marker(pytest.mark.skip(reason="no shipped checkpoint yet (trained by `volsmpl train`)"))
+
+
+@pytest.fixture(scope="session")
+def body():
+    return volsmpl.create_body()
+
+
+@pytest.fixture(scope="session")
+def tiny_config():
+    return VolumeConfig(latent_dim=16, encoder_hidden=16, encoder_blocks=2, n_surface_samples=64,
+                        decoder_hidden=16, nbw_rank=2)
+
+
+def random_pose(B: int, scale: float = 0.4, seed: int = 0, dtype=torch.float32, num_betas: int = 10):
+    g = torch.Generator().manual_seed(seed)
+    return dict(
+        betas=torch.randn(B, num_betas, generator=g, dtype=dtype),
+        global_orient=torch.randn(B, 3, generator=g, dtype=dtype) * scale,
+        body_pose=torch.randn(B, 69, generator=g, dtype=dtype) * scale,
+        transl=torch.randn(B, 3, generator=g, dtype=dtype) * 0.2,
+    )

@@ -1,0 +1,119 @@
+"""volsmpl.Body: matches smplx.SMPL on the same file, batching, gradients, clear errors."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+import volsmpl
+from volsmpl.body.model import DEFAULT_BODY_FILE, Body
+from conftest import random_pose
+
+
+def test_default_body_shapes(body):
+    out = body(**random_pose(3))
+    V = body.v_template.shape[0]
+    assert out.vertices.shape == (3, V, 3)
+    assert out.joints.shape == (3, 24, 3)
+    assert out.full_pose.shape == (3, 72)
+    assert body.faces.shape[1] == 3 and body.faces.max() < V
+
+
+def test_matches_smplx_smpl(body):
+    smplx = pytest.importorskip("smplx")
+    ref = smplx.SMPL(model_path=str(DEFAULT_BODY_FILE), num_betas=10)
+    p = random_pose(4, scale=0.6, seed=3)
+    ours = body(**p)
+    theirs = ref(betas=p["betas"], global_orient=p["global_orient"], body_pose=p["body_pose"], transl=p["transl"])
+    assert torch.allclose(ours.vertices, theirs.vertices, atol=1e-5)
+    assert torch.allclose(ours.joints, theirs.joints[:, :24], atol=1e-5)
+    assert torch.allclose(ours.full_pose, theirs.full_pose, atol=0)
+
+
+def test_batch_equals_items(body):
+    p = random_pose(3, seed=1)
+    full = body(**p)
+    for i in range(3):
+        one = body(**{k: v[i:i + 1] for k, v in p.items()})
+        assert torch.allclose(full.vertices[i], one.vertices[0], atol=1e-6)
+        assert torch.allclose(full.joints[i], one.joints[0], atol=1e-6)
+
+
+def test_rest_pose_is_template(body):
+    out = body()
+    assert torch.allclose(out.vertices[0], body.v_template, atol=1e-6)
+
+
+def test_skinning_transform_consistency(body):
+    """joint_transforms map the rest joints onto the posed joints (independent of the vertex path)."""
+    p = random_pose(2, seed=2)
+    out = body(**p)
+    rest = body(betas=p["betas"])
+    Jr = rest.joints
+    T = out.joint_transforms
+    mapped = (T[..., :3, :3] @ Jr[..., None])[..., 0] + T[..., :3, 3]
+    assert torch.allclose(mapped, out.joints, atol=1e-5)
+
+
+def test_gradients_finite_at_zero_pose(body):
+    pose = torch.zeros(1, 69, requires_grad=True)
+    betas = torch.zeros(1, 10, requires_grad=True)
+    out = body(body_pose=pose, betas=betas)
+    out.vertices.square().sum().backward()
+    assert torch.isfinite(pose.grad).all() and torch.isfinite(betas.grad).all()
+    assert betas.grad.abs().sum() > 0
+
+
+def test_float64(body):
+    b64 = volsmpl.create_body().to(torch.float64)
+    p = random_pose(1, dtype=torch.float64)
+    out = b64(**p)
+    assert out.vertices.dtype == torch.float64
+    assert torch.allclose(out.vertices.float(), body(**random_pose(1)).vertices, atol=1e-5)
+
+
+@pytest.mark.parametrize("kwargs,msg", [
+    (dict(body_pose=torch.zeros(1, 23, 3)), "expected (B, 69)"),
+    (dict(body_pose=torch.zeros(2, 69), transl=torch.zeros(3, 3)), "batch size"),
+    (dict(betas=torch.full((1, 10), float("nan"))), "NaN"),
+    (dict(transl=torch.zeros(1, 3, dtype=torch.float64)), "float64"),
+    (dict(betas=np.zeros((1, 10))), "torch.Tensor"),
+    (dict(pose2=torch.zeros(1)), "unexpected"),
+])
+def test_bad_inputs(body, kwargs, msg):
+    with pytest.raises((ValueError, TypeError), match=msg.replace("(", r"\(").replace(")", r"\)")):
+        body(**kwargs)
+
+
+def test_num_betas_bounds():
+    with pytest.raises(ValueError, match="shape components"):
+        Body(DEFAULT_BODY_FILE, num_betas=10_000)
+
+
+def test_missing_and_malformed_files(tmp_path):
+    with pytest.raises(FileNotFoundError, match="not found"):
+        Body(tmp_path / "nope.npz")
+    with pytest.raises(ValueError, match="chumpy"):
+        p = tmp_path / "SMPL_NEUTRAL.pkl"
+        p.write_bytes(b"x")
+        Body(p)
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="not a readable"):
+        Body(bad)
+    arrays = dict(np.load(DEFAULT_BODY_FILE))
+    partial = {k: v for k, v in arrays.items() if k != "J_regressor"}
+    np.savez(tmp_path / "partial.npz", **partial)
+    with pytest.raises(ValueError, match="missing arrays"):
+        Body(tmp_path / "partial.npz")
+    mano_like = dict(arrays)
+    mano_like["weights"] = np.ones((arrays["v_template"].shape[0], 16), np.float32) / 16
+    np.savez(tmp_path / "mano.npz", **mano_like)
+    with pytest.raises(ValueError, match="16 skinning joints"):
+        Body(tmp_path / "mano.npz")
+    nan = dict(arrays)
+    nan["v_template"] = nan["v_template"].copy()
+    nan["v_template"][0, 0] = np.nan
+    np.savez(tmp_path / "nan.npz", **nan)
+    with pytest.raises(ValueError, match="NaN"):
+        Body(tmp_path / "nan.npz")

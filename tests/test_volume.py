@@ -1,0 +1,220 @@
+"""The attach_volume API on random weights (tiny config): shapes, culling, analytic far field,
+sparse == dense, rigid motion, gradients vs finite differences, caching, bad input."""
+from __future__ import annotations
+
+import pytest
+import torch
+
+import volsmpl
+from volsmpl.nn.config import VolumeConfig
+from conftest import random_pose
+
+
+@pytest.fixture(scope="module")
+def vbody(tiny_config):
+    b = volsmpl.create_body()
+    volsmpl.attach_volume(b, pretrained=False, config=tiny_config)
+    return b
+
+
+def _near_points(out, n=400, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    B, V = out.vertices.shape[:2]
+    idx = torch.randint(0, V, (B, n), generator=g)
+    base = torch.gather(out.vertices.detach(), 1, idx[..., None].expand(-1, -1, 3))
+    return base + 0.05 * torch.randn(B, n, 3, generator=g, dtype=base.dtype)
+
+
+def test_shapes_and_broadcast(vbody):
+    out = vbody(**random_pose(2))
+    pts = _near_points(out)
+    assert vbody.volume.query(out, pts).shape == (2, 400)
+    assert vbody.volume.query_parts(out, pts).shape == (2, vbody.volume.num_parts, 400)
+    shared = vbody.volume.query(out, pts[0])
+    assert shared.shape == (2, 400)
+    assert torch.allclose(shared[0], vbody.volume.query(out, pts)[0])
+    assert vbody.volume.collision_loss(out, pts).ndim == 0
+    assert vbody.volume.collision_loss(out, pts, reduction="none").shape == (2, 400)
+    assert vbody.volume.collision_loss(out, pts, reduction="sum").shape == (2,)
+
+
+def test_far_points_skip_network_and_are_exact(vbody):
+    """A point outside every box costs no decoder evaluation and gets the exact distance to the union of boxes."""
+    out = vbody(**random_pose(1, seed=1))
+    vol = vbody.volume
+    far = torch.tensor([[[3.0, 0.5, 0.2], [0.0, -4.0, 1.0]]])
+    before = vol.decoder_evaluations
+    d = vol.query(out, far)
+    assert vol.decoder_evaluations == before
+    # brute force: distance from the point to dense samples of every box's surface
+    enc = vol.encode(out)
+    best = torch.full((2,), float("inf"))
+    s = torch.linspace(0, 1, 41)
+    uv = torch.stack(torch.meshgrid(s, s, indexing="ij"), -1).reshape(-1, 2)
+    for k in range(vol.num_parts):
+        lo, hi = enc.box_min[0, k], enc.box_max[0, k]
+        faces = []
+        for ax in range(3):
+            o = [a for a in range(3) if a != ax]
+            for val in (lo[ax], hi[ax]):
+                f = torch.empty(uv.shape[0], 3)
+                f[:, ax] = val
+                f[:, o[0]] = lo[o[0]] + uv[:, 0] * (hi[o[0]] - lo[o[0]])
+                f[:, o[1]] = lo[o[1]] + uv[:, 1] * (hi[o[1]] - lo[o[1]])
+                faces.append(f)
+        surf = torch.cat(faces)
+        world = surf @ enc.G[0, k, :3, :3].T + enc.G[0, k, :3, 3]
+        best = torch.minimum(best, torch.cdist(far[0], world).amin(1))
+    assert (d[0] <= best + 1e-5).all() and (d[0] >= best - 0.02).all()  # sampling grid spacing bound
+
+
+def test_sparse_equals_dense(vbody):
+    p = {k: v.clone().requires_grad_() for k, v in random_pose(3, seed=2).items()}
+    out = vbody(**p)
+    pts = _near_points(out, 300, seed=2)
+    pts = torch.cat([pts, torch.full((3, 5, 3), 5.0)], dim=1)  # include far points
+    pts[2] = 7.0  # a body with no point in any box
+    pts.requires_grad_()
+    vals = {}
+    for dense in (False, True):
+        d = vbody.volume.query(out, pts, dense=dense)
+        gp, gpose = torch.autograd.grad(d.square().sum(), (pts, p["body_pose"]), retain_graph=True)
+        vals[dense] = (d, gp, gpose)
+    for a, b in zip(vals[False], vals[True]):
+        assert torch.allclose(a, b, atol=1e-5)
+    parts = [vbody.volume.query_parts(out, pts, dense=d) for d in (False, True)]
+    assert torch.allclose(parts[0], parts[1], atol=1e-5)
+
+
+def test_rigid_motion_moves_field(vbody):
+    """global_orient rotates about the root joint and transl shifts: the SDF field moves with the body."""
+    p = random_pose(1, seed=3)
+    p["global_orient"] = torch.zeros(1, 3)
+    p["transl"] = torch.zeros(1, 3)
+    out1 = vbody(**p)
+    rot = torch.tensor([[0.3, -1.1, 0.4]])
+    t = torch.tensor([[0.5, -0.2, 1.0]])
+    out2 = vbody(**{**p, "global_orient": rot, "transl": t})
+    R = volsmpl.body.lbs.rodrigues(rot)[0, 0]
+    j0 = out1.joints[0, 0]
+    pts = _near_points(out1, 300, seed=3)
+    moved = (pts - j0) @ R.T + j0 + t
+    assert torch.allclose(vbody.volume.query(out1, pts), vbody.volume.query(out2, moved), atol=1e-4)
+
+
+def test_gradients_match_finite_differences(tiny_config):
+    b = volsmpl.create_body().to(torch.float64)
+    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).to(torch.float64)
+    p = random_pose(1, seed=4, dtype=torch.float64)
+    out0 = b(**p)
+    pts = _near_points(out0, 40, seed=4)
+
+    def f(body_pose, betas, transl, x):
+        o = b(betas=betas, global_orient=p["global_orient"], body_pose=body_pose, transl=transl)
+        return vol.query(o, x)
+
+    args = (p["body_pose"].clone().requires_grad_(), p["betas"].clone().requires_grad_(),
+            p["transl"].clone().requires_grad_(), pts.clone().requires_grad_())
+    # gradcheck on a few outputs; piecewise-linear ReLU/min/box kinks are measure-zero for random inputs
+    assert torch.autograd.gradcheck(lambda *a: f(*a)[:, :8], args, eps=1e-6, atol=1e-5, rtol=1e-3)
+
+
+def test_cache(vbody):
+    vol = vbody.volume
+    out = vbody(**random_pose(1, seed=5))
+    pts = _near_points(out, 100)
+    e1 = vol.encode(out)
+    assert vol.encode(out) is e1  # same output, unchanged tensors: cached
+    fresh = vol._encode(out, None)
+    for a, b in zip(e1.code.z, fresh.code.z):
+        assert torch.equal(a, b)
+    assert torch.equal(vol.query(out, pts), vol.query(vbody(**random_pose(1, seed=5)), pts))
+    out.vertices.add_(0.01)  # in-place change: must re-encode
+    assert vol.encode(out) is not e1
+
+
+def test_no_grad_value_reuse(vbody):
+    vol = vbody.volume
+    p = random_pose(1, seed=6)
+    with torch.no_grad():
+        e1 = vol.encode(vbody(**p))
+        assert vol.encode(vbody(**p)) is e1  # same pose/shape/translation in a new output
+        assert vol.encode(vbody(**random_pose(1, seed=7))) is not e1
+
+
+def test_empty_and_bad_points(vbody):
+    vol = vbody.volume
+    out = vbody(**random_pose(2))
+    assert vol.query(out, torch.zeros(2, 0, 3)).shape == (2, 0)
+    assert vol.query_parts(out, torch.zeros(0, 3)).shape == (2, vol.num_parts, 0)
+    assert vol.collision_loss(out, torch.zeros(2, 0, 3)) == 0
+    bad = torch.zeros(2, 5, 3)
+    bad[1, 2, 0] = float("nan")
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        vol.query(out, bad)
+    with pytest.raises(ValueError, match="shape"):
+        vol.query(out, torch.zeros(2, 5, 2))
+    with pytest.raises(ValueError, match="3 bodies"):
+        vol.query(out, torch.zeros(3, 5, 3))
+    with pytest.raises(TypeError, match="float64"):
+        vol.query(out, torch.zeros(2, 5, 3, dtype=torch.float64))
+    with pytest.raises(TypeError, match="torch.Tensor"):
+        vol.query(out, [[0.0, 0.0, 0.0]])
+    with pytest.raises(ValueError, match="reduction"):
+        vol.collision_loss(out, torch.zeros(2, 5, 3), reduction="avg")
+    with pytest.raises(TypeError, match="body forward output"):
+        vol.query(object(), torch.zeros(2, 5, 3))
+
+
+def test_selfpen_runs(vbody):
+    out = vbody(**random_pose(2, scale=0.8, seed=8))
+    loss, pts = vbody.volume.selfpen_loss(out, return_points=True, generator=torch.Generator().manual_seed(0))
+    assert loss.shape == (2,) and len(pts) == 2 and torch.isfinite(loss).all()
+
+
+def test_chunking_bounded(vbody):
+    vol = vbody.volume
+    out = vbody(**random_pose(1, seed=9))
+    pts = _near_points(out, 3000)
+    full = vol.query(out, pts)
+    old = vol.chunk_elems
+    try:
+        vol.chunk_elems = 1024 * vol.num_parts  # forces chunks of 1024 points
+        assert len(vol._chunks(1, 3000)) == 3
+        assert torch.allclose(vol.query(out, pts), full, atol=1e-6)
+    finally:
+        vol.chunk_elems = old
+
+
+def test_attach_without_checkpoint_explains():
+    b = volsmpl.create_body()
+    with pytest.raises(FileNotFoundError, match="volsmpl train"):
+        volsmpl.attach_volume(b)
+    with pytest.raises(ValueError, match="unknown model"):
+        volsmpl.attach_volume(b, model="leap", pretrained=False)
+
+
+def test_smplx_smplx_model(tiny_config):
+    smplx = pytest.importorskip("smplx")
+    from volsmpl.body.model import DEFAULT_SMPLX_FILE
+    m = smplx.SMPLX(model_path=str(DEFAULT_SMPLX_FILE), use_pca=False, num_betas=10)
+    vol = volsmpl.attach_volume(m, pretrained=False, config=tiny_config)
+    assert vol.num_parts == 15
+    out = m(body_pose=torch.randn(1, 63) * 0.3, return_full_pose=True)
+    d = vol.query(out, _near_points(out, 200))
+    assert d.shape == (1, 200) and torch.isfinite(d).all()
+
+
+@pytest.mark.needs_checkpoint
+def test_selfpen_trained():
+    b = volsmpl.create_body()
+    volsmpl.attach_volume(b)
+    t = b()
+    assert float(b.volume.selfpen_loss(t, generator=torch.Generator().manual_seed(0))[0]) == 0.0
+    pose = torch.zeros(1, 69)
+    # forearms crossed through the torso: shoulders forward and in, elbows bent inward
+    pose[0, 15 * 3 + 1] = -1.3   # left_shoulder about y (arm forward)
+    pose[0, 16 * 3 + 1] = 1.3
+    pose[0, 17 * 3 + 1] = -2.0   # left elbow bends the forearm into the chest
+    pose[0, 18 * 3 + 1] = 2.0
+    assert float(b.volume.selfpen_loss(b(body_pose=pose), generator=torch.Generator().manual_seed(0))[0]) > 0
