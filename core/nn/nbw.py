@@ -178,7 +178,8 @@ class NBWDecoder(nn.Module):
             self.base_weight.append(nn.Parameter(w))
             self.base_bias.append(nn.Parameter(b))
             self.shape_weight.append(nn.Parameter(torch.randn(S, self.rank, o, i) * shape_init_std))
-            self.blend.append(nn.Linear(self.latent_dim, self.rank))
+            if self.rank > 0:
+                self.blend.append(nn.Linear(self.latent_dim, self.rank))
 
     @classmethod
     def from_config(cls, cfg, n_parts: int, **kwargs) -> "NBWDecoder":

@@ -1,0 +1,147 @@
+"""Checkpoint files: tensors in safetensors (nothing is unpickled) + a JSON sidecar.
+
+A checkpoint ``<path>`` is the pair ``<path>.safetensors`` (the state dict) and ``<path>.json``::
+
+    {"format": "volsmpl-checkpoint", "version": 1,
+     "config": {...network config, e.g. VolumeConfig.to_dict()...},
+     "meta":   {"body_fingerprint": "...", "parts": ..., "training": ...}}
+
+Both files are written to temporary names and moved into place with ``os.replace`` so a crash
+never leaves a half-written checkpoint under the final name.
+"""
+from __future__ import annotations
+
+import json
+import os
+from typing import Any, Dict, Optional, Tuple
+
+import torch
+
+FORMAT = "volsmpl-checkpoint"
+VERSION = 1
+FINGERPRINT_KEY = "body_fingerprint"
+
+_HOWTO = ("download the released checkpoint or train one with `volsmpl train ...` "
+          "(see `volsmpl train --help`)")
+
+
+class CheckpointError(RuntimeError):
+    """A checkpoint is missing, corrupt, of an unknown format, or trained for another body."""
+
+
+def checkpoint_paths(path: str | os.PathLike) -> Tuple[str, str]:
+    """(tensor file, JSON file) of a checkpoint given with or without extension."""
+    p = os.fspath(path)
+    for ext in (".safetensors", ".json"):
+        if p.endswith(ext):
+            p = p[: -len(ext)]
+            break
+    return p + ".safetensors", p + ".json"
+
+
+def save_checkpoint(path: str | os.PathLike, state_dict: Dict[str, torch.Tensor],
+                    config: Dict[str, Any], meta: Dict[str, Any]) -> Tuple[str, str]:
+    """Write ``<path>.safetensors`` and ``<path>.json`` atomically.
+
+    Args:
+        path: checkpoint path, with or without extension.
+        state_dict: name -> tensor (moved to CPU, made contiguous; shared storage is copied).
+        config: JSON-serialisable network configuration.
+        meta: JSON-serialisable metadata; ``meta["body_fingerprint"]`` is checked on load.
+    Returns:
+        (tensor file, JSON file) paths.
+    """
+    from safetensors.torch import save_file
+
+    st_path, js_path = checkpoint_paths(path)
+    tensors = {}
+    for k, v in state_dict.items():
+        if not isinstance(v, torch.Tensor):
+            raise TypeError(f"save_checkpoint: state_dict['{k}'] is a {type(v).__name__}, only tensors can be "
+                            "stored; put other values into `meta`")
+        tensors[k] = v.detach().to("cpu").contiguous().clone()
+    try:
+        doc = json.dumps({"format": FORMAT, "version": VERSION, "config": config, "meta": meta},
+                         indent=2, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError) as e:
+        raise TypeError(f"save_checkpoint: config/meta must be JSON-serialisable (plain dicts, lists, "
+                        f"str, finite numbers): {e}") from e
+    fp = meta.get(FINGERPRINT_KEY) if isinstance(meta, dict) else None
+    header = {"format": FORMAT, "version": str(VERSION)}
+    if fp is not None:
+        header[FINGERPRINT_KEY] = str(fp)
+
+    d = os.path.dirname(os.path.abspath(st_path))
+    os.makedirs(d, exist_ok=True)
+    tmp_st, tmp_js = st_path + f".tmp{os.getpid()}", js_path + f".tmp{os.getpid()}"
+    try:
+        save_file(tensors, tmp_st, metadata=header)
+        with open(tmp_js, "w") as f:
+            f.write(doc)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp_st, st_path)
+        os.replace(tmp_js, js_path)
+    finally:
+        for t in (tmp_st, tmp_js):
+            if os.path.exists(t):
+                os.remove(t)
+    return st_path, js_path
+
+
+def load_checkpoint(path: str | os.PathLike, expected_fingerprint: Optional[str] = None,
+                    map_location: str | torch.device = "cpu"
+                    ) -> Tuple[Dict[str, torch.Tensor], Dict[str, Any], Dict[str, Any]]:
+    """Read a checkpoint written by :func:`save_checkpoint`.
+
+    Args:
+        path: checkpoint path, with or without extension.
+        expected_fingerprint: if given, the fingerprint of the body the caller uses; the
+            checkpoint must have been trained for it.
+        map_location: device of the returned tensors.
+    Returns:
+        (state_dict, config, meta).
+    Raises:
+        CheckpointError: missing/corrupt files, unknown format or version, fingerprint mismatch.
+    """
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file
+
+    st_path, js_path = checkpoint_paths(path)
+    for f in (js_path, st_path):
+        if not os.path.isfile(f):
+            raise CheckpointError(f"checkpoint file not found: {f}. A checkpoint is the pair "
+                                  f"{os.path.basename(st_path)} + {os.path.basename(js_path)}; {_HOWTO}.")
+    try:
+        with open(js_path, "r") as f:
+            doc = json.load(f)
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise CheckpointError(f"checkpoint file {js_path} is corrupt (not valid JSON: {e}); "
+                              f"re-save or re-download it, or {_HOWTO}.") from e
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        fmt = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        raise CheckpointError(f"{js_path} is not a volsmpl checkpoint (format {fmt!r}, expected {FORMAT!r}).")
+    if doc.get("version") != VERSION:
+        raise CheckpointError(f"{js_path} has checkpoint version {doc.get('version')!r}; this volsmpl reads "
+                              f"version {VERSION}. Use the volsmpl release that wrote it, or re-train.")
+    for key in ("config", "meta"):
+        if not isinstance(doc.get(key), dict):
+            raise CheckpointError(f"checkpoint file {js_path} is corrupt: '{key}' must be an object.")
+    config, meta = doc["config"], doc["meta"]
+
+    if expected_fingerprint is not None:
+        fp = meta.get(FINGERPRINT_KEY)
+        if fp is None:
+            raise CheckpointError(f"checkpoint {js_path} records no body fingerprint, so it cannot be checked "
+                                  f"against this body ({expected_fingerprint}); train one with `volsmpl train ...` "
+                                  "or load it without expected_fingerprint.")
+        if fp != expected_fingerprint:
+            raise CheckpointError(f"checkpoint was trained for body {fp}, this body is {expected_fingerprint}; "
+                                  "train one with `volsmpl train ...` or pass the matching body.")
+
+    try:
+        state_dict = load_file(st_path, device=str(map_location))
+    except (SafetensorError, OSError, ValueError, RuntimeError) as e:
+        raise CheckpointError(f"checkpoint file {st_path} is corrupt or truncated ({e}); "
+                              f"re-save or re-download it, or {_HOWTO}.") from e
+    return state_dict, config, meta

@@ -1,0 +1,118 @@
+import json
+import os
+
+import pytest
+import torch
+
+from volsmpl.checkpoint import CheckpointError, checkpoint_paths, load_checkpoint, save_checkpoint
+from volsmpl.nn.config import VolumeConfig
+
+
+def _save(tmp_path, fp="abc123"):
+    sd = {"a.weight": torch.randn(3, 4), "b": torch.arange(5), "c": torch.randn(2, 2).T}  # non-contiguous
+    cfg = VolumeConfig(nbw_rank=4).to_dict()
+    meta = {"body_fingerprint": fp, "parts": ["pelvis", "spine"], "training": {"steps": 10}}
+    save_checkpoint(tmp_path / "model", sd, cfg, meta)
+    return sd, cfg, meta
+
+
+def test_round_trip(tmp_path):
+    sd, cfg, meta = _save(tmp_path)
+    assert sorted(os.listdir(tmp_path)) == ["model.json", "model.safetensors"]  # no temp files left
+    for p in (tmp_path / "model", tmp_path / "model.safetensors", str(tmp_path / "model.json")):
+        sd2, cfg2, meta2 = load_checkpoint(p, expected_fingerprint="abc123")
+        assert sd2.keys() == sd.keys()
+        for k in sd:
+            assert torch.equal(sd2[k], sd[k]) and sd2[k].dtype == sd[k].dtype
+        assert cfg2 == cfg and meta2 == meta
+        assert VolumeConfig.from_dict(cfg2) == VolumeConfig(nbw_rank=4)
+    doc = json.loads((tmp_path / "model.json").read_text())
+    assert doc["format"] == "volsmpl-checkpoint" and doc["version"] == 1
+
+
+def test_shared_storage_and_module_state(tmp_path):
+    lin = torch.nn.Linear(3, 2)
+    sd = {"w": lin.weight, "w_alias": lin.weight, "bias": lin.bias}
+    save_checkpoint(tmp_path / "m", sd, {}, {})
+    sd2, _, _ = load_checkpoint(tmp_path / "m")
+    assert torch.equal(sd2["w_alias"], lin.weight.detach())
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(CheckpointError, match=r"not found: .*nothere\.json.*volsmpl train"):
+        load_checkpoint(tmp_path / "nothere")
+    _save(tmp_path)
+    os.remove(tmp_path / "model.safetensors")
+    with pytest.raises(CheckpointError, match=r"not found: .*model\.safetensors"):
+        load_checkpoint(tmp_path / "model")
+
+
+def test_corrupt_safetensors(tmp_path):
+    _save(tmp_path)
+    p = tmp_path / "model.safetensors"
+    data = p.read_bytes()
+    p.write_bytes(data[: len(data) // 2])                  # truncated
+    with pytest.raises(CheckpointError, match="corrupt"):
+        load_checkpoint(tmp_path / "model")
+    p.write_bytes(b"\x00" * 64)                            # garbage
+    with pytest.raises(CheckpointError, match="corrupt"):
+        load_checkpoint(tmp_path / "model")
+
+
+def test_corrupt_json(tmp_path):
+    _save(tmp_path)
+    p = tmp_path / "model.json"
+    p.write_text(p.read_text()[:20])
+    with pytest.raises(CheckpointError, match=r"model\.json is corrupt"):
+        load_checkpoint(tmp_path / "model")
+
+
+def test_wrong_format_and_version(tmp_path):
+    _save(tmp_path)
+    p = tmp_path / "model.json"
+    doc = json.loads(p.read_text())
+    p.write_text(json.dumps({**doc, "format": "other"}))
+    with pytest.raises(CheckpointError, match="not a volsmpl checkpoint"):
+        load_checkpoint(tmp_path / "model")
+    p.write_text(json.dumps({**doc, "version": 99}))
+    with pytest.raises(CheckpointError, match="version 99"):
+        load_checkpoint(tmp_path / "model")
+
+
+def test_fingerprint_mismatch(tmp_path):
+    _save(tmp_path, fp="aaaa")
+    with pytest.raises(CheckpointError) as e:
+        load_checkpoint(tmp_path / "model", expected_fingerprint="bbbb")
+    msg = str(e.value)
+    assert "trained for body aaaa, this body is bbbb" in msg and "volsmpl train" in msg
+    load_checkpoint(tmp_path / "model")                    # no expectation -> loads
+
+
+def test_no_fingerprint_recorded(tmp_path):
+    save_checkpoint(tmp_path / "m", {"x": torch.zeros(1)}, {}, {})
+    with pytest.raises(CheckpointError, match="no body fingerprint"):
+        load_checkpoint(tmp_path / "m", expected_fingerprint="bbbb")
+
+
+def test_save_rejects_bad_inputs(tmp_path):
+    with pytest.raises(TypeError, match="only tensors"):
+        save_checkpoint(tmp_path / "m", {"x": 3}, {}, {})
+    with pytest.raises(TypeError, match="JSON-serialisable"):
+        save_checkpoint(tmp_path / "m", {}, {"bad": object()}, {})
+    assert not os.listdir(tmp_path)
+
+
+def test_paths():
+    assert checkpoint_paths("a/b") == ("a/b.safetensors", "a/b.json")
+    assert checkpoint_paths("a/b.json") == ("a/b.safetensors", "a/b.json")
+
+
+def test_config_dict_round_trip_and_unknown_keys():
+    cfg = VolumeConfig()
+    d = cfg.to_dict()
+    assert d["skip_layers"] == [3] and json.loads(json.dumps(d)) == d
+    assert VolumeConfig.from_dict(d) == cfg
+    with pytest.raises(ValueError, match=r"unknown VolumeConfig key\(s\) \['nope'\]"):
+        VolumeConfig.from_dict({**d, "nope": 1})
+    with pytest.raises(ValueError, match="skip_layers"):
+        VolumeConfig(skip_layers=(9,))

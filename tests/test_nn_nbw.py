@@ -1,0 +1,215 @@
+import pytest
+import torch
+
+from volsmpl.nn.config import VolumeConfig
+from volsmpl.nn.nbw import NBWDecoder, count_parameters, group_pairs
+from volsmpl.nn.pointnet import ResnetPointNet
+from volsmpl.nn.posenc import positional_encoding
+
+
+def _tiny(K=3, dtype=torch.float64, share=False, seed=0, **kw):
+    torch.manual_seed(seed)
+    args = dict(latent_dim=5, hidden=8, n_layers=5, skip_layers=(2,), pe_levels=2, rank=2,
+                shape_init_std=0.3, share_shapes=share)
+    args.update(kw)
+    return NBWDecoder(K, **args).to(dtype)
+
+
+def _naive_decoder(model, full_weights, x_local, z):
+    """Reference: per point concatenate z_k to the input (no folding), explicit skip concat."""
+    B, K, N, _ = x_local.shape
+    p = positional_encoding(x_local, model.pe_levels)
+    u = torch.cat([p, z[:, :, None, :].expand(B, K, N, z.shape[-1])], -1)   # decoder input [gamma(x), z]
+    h = u
+    for l, W in enumerate(full_weights):
+        if l in model.skip_layers:
+            h = torch.cat([h, u], -1)
+        h = torch.einsum("bkoi,bkni->bkno", W, h) + model.base_bias[l]
+        if l < model.n_layers - 1:
+            h = torch.relu(h)
+    return h[..., 0]
+
+
+@pytest.mark.parametrize("share", [False, True])
+def test_blended_weights_explicit_loop(share):
+    m = _tiny(K=3, share=share)
+    z = torch.randn(2, 3, 5, dtype=torch.float64)
+    full = m.blended_weights(z)
+    for l in range(m.n_layers):
+        assert full[l].shape == (2, 3, m.out_dims[l], m.in_dims[l])
+        for b in range(2):
+            for k in range(3):
+                v = z[b, k] @ m.blend[l].weight.T + m.blend[l].bias
+                W = m.base_weight[l].clone()
+                for r in range(m.rank):
+                    W = W + v[r] * m.shape_weight[l][0 if share else k, r]
+                torch.testing.assert_close(full[l][b, k], W)
+
+
+def test_rank_zero_is_base_mlp():
+    m = _tiny(rank=0)
+    z = torch.randn(2, 3, 5, dtype=torch.float64)
+    for l, W in enumerate(m.blended_weights(z)):
+        torch.testing.assert_close(W, m.base_weight[l].expand_as(W))
+
+
+def test_folded_bias_equals_naive_concat():
+    m = _tiny(K=4)
+    z = torch.randn(2, 4, 5, dtype=torch.float64)
+    x = torch.randn(2, 4, 30, 3, dtype=torch.float64) * 0.5
+    ref = _naive_decoder(m, m.blended_weights(z), x, z)
+    gen = m.generate(z)
+    assert gen.weights[0].shape == (2, 4, 8, 15)            # latent columns folded away
+    assert gen.weights[2].shape == (2, 4, 8, 8 + 15)
+    torch.testing.assert_close(m.decode_dense(x, gen), ref)
+
+
+def test_folded_bias_default_config_float32():
+    cfg = VolumeConfig()
+    torch.manual_seed(0)
+    m = NBWDecoder.from_config(cfg, n_parts=2, shape_init_std=0.02)
+    z = torch.randn(1, 2, 128)
+    x = torch.randn(1, 2, 50, 3) * 0.3
+    with torch.no_grad():
+        ref = _naive_decoder(m, m.blended_weights(z), x, z)
+        out = m.decode_dense(x, m.generate(z))
+    torch.testing.assert_close(out, ref, atol=1e-5, rtol=1e-5)
+
+
+def _pairs_vs_dense(m, z, x, bi, pi, chunk=None, atol=1e-5):
+    """decode_pairs must equal decode_dense gathered at the same (body, part, point) pairs,
+    in value and in gradient w.r.t. x and z."""
+    B, K = z.shape[:2]
+    M = x.shape[0]
+    z1 = z.clone().requires_grad_()
+    x1 = x.clone().requires_grad_()
+    y = m.decode_pairs(x1, bi, pi, m.generate(z1), chunk=chunk)
+    # dense reference: put every pair's point in slot (b, k, n) of a dense tensor
+    z2 = z.clone().requires_grad_()
+    x2 = x.clone().requires_grad_()
+    dense_x = torch.zeros(B, K, M, 3, dtype=x.dtype)
+    idx = torch.arange(M)
+    dense_x = dense_x.index_put((bi, pi, idx), x2)
+    d = m.decode_dense(dense_x, m.generate(z2))[bi, pi, idx]
+    torch.testing.assert_close(y, d, atol=atol, rtol=atol)
+    w = torch.randn(M, dtype=x.dtype)
+    gx1, gz1 = torch.autograd.grad((y * w).sum(), (x1, z1))
+    gx2, gz2 = torch.autograd.grad((d * w).sum(), (x2, z2))
+    torch.testing.assert_close(gx1, gx2, atol=atol, rtol=atol)
+    torch.testing.assert_close(gz1, gz2, atol=atol, rtol=atol)
+    return y
+
+
+@pytest.mark.parametrize("chunk", [None, 1, 3, 16, 1000])
+def test_decode_pairs_matches_dense(chunk):
+    m = _tiny(K=4)
+    g = torch.Generator().manual_seed(0)
+    B, M = 3, 200
+    z = torch.randn(B, 4, 5, dtype=torch.float64, generator=g)
+    x = torch.randn(M, 3, dtype=torch.float64, generator=g) * 0.5
+    bi = torch.randint(0, B, (M,), generator=g)
+    bi[bi == 1] = 2                                   # body 1 has no pairs
+    pi = torch.randint(0, 3, (M,), generator=g)       # part 3 empty in every body
+    _pairs_vs_dense(m, z, x, bi, pi, chunk=chunk, atol=1e-10)
+
+
+def test_decode_pairs_all_in_one_part_float32():
+    cfg = VolumeConfig()
+    torch.manual_seed(1)
+    m = NBWDecoder.from_config(cfg, n_parts=16, shape_init_std=0.02)
+    z = torch.randn(2, 16, 128)
+    x = torch.randn(700, 3) * 0.3
+    bi = torch.ones(700, dtype=torch.long)
+    pi = torch.full((700,), 7, dtype=torch.long)
+    _pairs_vs_dense(m, z, x, bi, pi, atol=1e-5)
+
+
+def test_decode_pairs_float32_random_pairs_default_config():
+    cfg = VolumeConfig()
+    torch.manual_seed(2)
+    m = NBWDecoder.from_config(cfg, n_parts=15, shape_init_std=0.02)
+    z = torch.randn(2, 15, 128)
+    M = 600
+    x = torch.randn(M, 3) * 0.3
+    _pairs_vs_dense(m, z, x, torch.randint(0, 2, (M,)), torch.randint(0, 15, (M,)), atol=1e-5)
+
+
+def test_decode_pairs_nograd_tiled_path_equals_grad_path(monkeypatch):
+    m = _tiny(K=3)
+    g = torch.Generator().manual_seed(3)
+    z = torch.randn(2, 3, 5, dtype=torch.float64, generator=g)
+    x = torch.randn(500, 3, dtype=torch.float64, generator=g)
+    bi = torch.randint(0, 2, (500,), generator=g)
+    pi = torch.randint(0, 3, (500,), generator=g)
+    with torch.no_grad():
+        gen = m.generate(z)
+        monkeypatch.setattr(NBWDecoder, "TILE_ROWS", 40)   # many tiles
+        y_tiled = m.decode_pairs(x, bi, pi, gen, chunk=16)
+    xg = x.clone().requires_grad_()
+    y_grad = m.decode_pairs(xg, bi, pi, m.generate(z), chunk=16)
+    torch.testing.assert_close(y_tiled, y_grad.detach())
+
+
+def test_decode_pairs_gradcheck():
+    m = _tiny(K=3)
+    g = torch.Generator().manual_seed(4)
+    B, M = 2, 12
+    z = torch.randn(B, 3, 5, dtype=torch.float64, generator=g, requires_grad=True)
+    x = torch.randn(M, 3, dtype=torch.float64, generator=g, requires_grad=True)
+    bi = torch.randint(0, B, (M,), generator=g)
+    pi = torch.randint(0, 3, (M,), generator=g)
+    assert torch.autograd.gradcheck(lambda x, z: m.decode_pairs(x, bi, pi, m.generate(z), chunk=4), (x, z))
+
+
+def test_decode_pairs_empty():
+    m = _tiny(K=3)
+    gen = m.generate(torch.randn(1, 3, 5, dtype=torch.float64))
+    y = m.decode_pairs(torch.zeros(0, 3, dtype=torch.float64), torch.zeros(0, dtype=torch.long),
+                       torch.zeros(0, dtype=torch.long), gen)
+    assert y.shape == (0,)
+
+
+def test_group_pairs_layout():
+    g = torch.tensor([2, 0, 2, 2, 5, 0, 2])
+    lay = group_pairs(g, 6, 2)
+    # groups 0 (2 pairs -> 1 chunk), 2 (4 -> 2 chunks), 5 (1 -> 1 chunk)
+    assert lay.chunk_group.tolist() == [0, 2, 2, 5]
+    assert len(set(lay.slot.tolist())) == 7
+    assert torch.equal(lay.src[lay.slot], torch.arange(7))
+    assert torch.equal(lay.chunk_group[torch.div(lay.slot, 2, rounding_mode="floor")], g)
+
+
+def test_errors_are_clear():
+    m = _tiny(K=3)
+    with pytest.raises(ValueError, match=r"\(B, K=3, 5\)"):
+        m.generate(torch.randn(1, 4, 5, dtype=torch.float64))
+    gen = m.generate(torch.randn(2, 3, 5, dtype=torch.float64))
+    x = torch.zeros(4, 3, dtype=torch.float64)
+    with pytest.raises(IndexError, match="must lie in"):
+        m.decode_pairs(x, torch.tensor([0, 1, 2, 0]), torch.zeros(4, dtype=torch.long), gen)
+    with pytest.raises(ValueError, match=r"\(M=4,\)"):
+        m.decode_pairs(x, torch.zeros(3, dtype=torch.long), torch.zeros(4, dtype=torch.long), gen)
+    with pytest.raises(ValueError, match="K=3"):
+        m.decode_dense(torch.zeros(2, 2, 5, 3, dtype=torch.float64), gen)
+    with pytest.raises(ValueError, match="skip layer"):
+        NBWDecoder(3, n_layers=3, skip_layers=(3,))
+
+
+def test_parameter_count_formula():
+    cfg = VolumeConfig()
+    for K in (15, 16):
+        dec = NBWDecoder.from_config(cfg, n_parts=K)
+        d_in = 15 + 128
+        ins = [d_in, 64, 64, 64 + d_in, 64, 64, 64]
+        outs = [64] * 6 + [1]
+        per_layer = sum(o * i + o + K * 80 * o * i + 128 * 80 + 80 for o, i in zip(outs, ins))
+        assert count_parameters(dec) == per_layer
+    enc = ResnetPointNet.from_config(cfg)
+    expected_enc = (3 * 256 + 256) + 4 * (256 * 128 + 128 + 128 * 128 + 128 + 256 * 128) + 128 * 128 + 128
+    assert count_parameters(enc) == expected_enc
+    assert count_parameters(enc, enc) == expected_enc      # shared modules counted once
+
+
+def test_flops_per_pair():
+    m = NBWDecoder.from_config(VolumeConfig(), n_parts=1)
+    assert m.flops_per_pair() == 2 * (64 * 15 + 4 * 64 * 64 + 64 * 79 + 64)

@@ -1,0 +1,55 @@
+import pytest
+import torch
+
+from volsmpl.nn.config import VolumeConfig
+from volsmpl.nn.pointnet import ResnetPointNet
+
+
+def _net():
+    torch.manual_seed(0)
+    net = ResnetPointNet(latent_dim=16, hidden=12, n_blocks=4)
+    # non-zero residual branches so every layer matters in the tests
+    for blk in net.blocks:
+        torch.nn.init.normal_(blk.fc_1.weight, std=0.2)
+    return net.double()
+
+
+def test_shapes_and_config():
+    net = ResnetPointNet.from_config(VolumeConfig())
+    assert net(torch.randn(3, 50, 3)).shape == (3, 128)
+    assert len(net.blocks) == 4
+
+
+def test_permutation_invariance():
+    net = _net()
+    pts = torch.randn(4, 64, 3, dtype=torch.float64)
+    perm = torch.randperm(64)
+    torch.testing.assert_close(net(pts), net(pts[:, perm]))
+
+
+def test_batch_independence():
+    net = _net()
+    pts = torch.randn(5, 32, 3, dtype=torch.float64)
+    full = net(pts)
+    for i in range(5):
+        torch.testing.assert_close(full[i:i + 1], net(pts[i:i + 1]))
+    pts2 = pts.clone()
+    pts2[0] += 1.0
+    out2 = net(pts2)
+    torch.testing.assert_close(out2[1:], full[1:])
+    assert not torch.allclose(out2[0], full[0])
+
+
+def test_global_context_reaches_every_block():
+    # Only max-pooled (set) information is used: duplicating points leaves the code unchanged.
+    net = _net()
+    pts = torch.randn(1, 20, 3, dtype=torch.float64)
+    torch.testing.assert_close(net(pts), net(torch.cat([pts, pts[:, :5]], 1)))
+
+
+def test_input_errors():
+    net = ResnetPointNet(8, 8, 2)
+    with pytest.raises(ValueError, match=r"\(N, P, 3\)"):
+        net(torch.zeros(10, 3))
+    with pytest.raises(ValueError, match="empty"):
+        net(torch.zeros(2, 0, 3))
