@@ -116,22 +116,22 @@ def test_decode_pairs_matches_dense(chunk):
 def test_decode_pairs_all_in_one_part_float32():
     cfg = VolumeConfig()
     torch.manual_seed(1)
-    m = NBWDecoder.from_config(cfg, n_parts=16, shape_init_std=0.02)
-    z = torch.randn(2, 16, 128)
+    m = NBWDecoder.from_config(cfg, n_parts=4, shape_init_std=0.02)
+    z = torch.randn(2, 4, 128)
     x = torch.randn(700, 3) * 0.3
     bi = torch.ones(700, dtype=torch.long)
-    pi = torch.full((700,), 7, dtype=torch.long)
+    pi = torch.full((700,), 2, dtype=torch.long)
     _pairs_vs_dense(m, z, x, bi, pi, atol=1e-5)
 
 
 def test_decode_pairs_float32_random_pairs_default_config():
     cfg = VolumeConfig()
     torch.manual_seed(2)
-    m = NBWDecoder.from_config(cfg, n_parts=15, shape_init_std=0.02)
-    z = torch.randn(2, 15, 128)
+    m = NBWDecoder.from_config(cfg, n_parts=5, shape_init_std=0.02)
+    z = torch.randn(2, 5, 128)
     M = 600
     x = torch.randn(M, 3) * 0.3
-    _pairs_vs_dense(m, z, x, torch.randint(0, 2, (M,)), torch.randint(0, 15, (M,)), atol=1e-5)
+    _pairs_vs_dense(m, z, x, torch.randint(0, 2, (M,)), torch.randint(0, 5, (M,)), atol=1e-5)
 
 
 def test_decode_pairs_nograd_tiled_path_equals_grad_path(monkeypatch):
@@ -153,7 +153,7 @@ def test_decode_pairs_nograd_tiled_path_equals_grad_path(monkeypatch):
 def test_decode_pairs_gradcheck():
     m = _tiny(K=3)
     g = torch.Generator().manual_seed(4)
-    B, M = 2, 12
+    B, M = 2, 10
     z = torch.randn(B, 3, 5, dtype=torch.float64, generator=g, requires_grad=True)
     x = torch.randn(M, 3, dtype=torch.float64, generator=g, requires_grad=True)
     bi = torch.randint(0, B, (M,), generator=g)
@@ -198,7 +198,8 @@ def test_errors_are_clear():
 def test_parameter_count_formula():
     cfg = VolumeConfig()
     for K in (15, 16):
-        dec = NBWDecoder.from_config(cfg, n_parts=K)
+        with torch.device("meta"):                          # shapes only, no memory or init cost
+            dec = NBWDecoder.from_config(cfg, n_parts=K)
         d_in = 15 + 128
         ins = [d_in, 64, 64, 64 + d_in, 64, 64, 64]
         outs = [64] * 6 + [1]
