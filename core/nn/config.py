@@ -26,6 +26,10 @@ class VolumeConfig:
         pe_levels: positional-encoding frequency levels of the query point (A.1: 2).
         nbw_rank: number R of blended shape matrices per layer (Sec. 3.3: 80).
         box_padding: relative padding of each part's bounding box (Sec. 3.1: 12.5%).
+        nbw_shared_shapes: one set of R shape matrices per layer shared by all parts (blended with
+            part-specific coefficients v_k from z_k). True reproduces the paper's parameter count
+            (4.0M at R=80, Table 2: ~40k parameters per unit of R); False gives every part its own
+            R matrices (K times more parameters, ~47M at K=15).
     """
 
     latent_dim: int = 128
@@ -38,6 +42,7 @@ class VolumeConfig:
     pe_levels: int = 2
     nbw_rank: int = 80
     box_padding: float = 0.125
+    nbw_shared_shapes: bool = True
 
     def __post_init__(self):
         self.skip_layers = tuple(int(s) for s in self.skip_layers)

@@ -37,7 +37,7 @@ class VolumetricSMPLNet(nn.Module):
         self.config = config or VolumeConfig()
         self.num_parts = num_parts
         self.encoder = ResnetPointNet.from_config(self.config)
-        self.decoder = NBWDecoder.from_config(self.config, num_parts, share_shapes=getattr(self.config, "nbw_shared_shapes", True))
+        self.decoder = NBWDecoder.from_config(self.config, num_parts, share_shapes=self.config.nbw_shared_shapes)
 
     def encode(self, local_surface: torch.Tensor) -> PartCode:
         """local_surface (B, K, P, 3) part surface samples in part frames -> PartCode."""

@@ -1,0 +1,129 @@
+"""Pose sampler and named poses for SMPL-format bodies (24 joints, SMPL conventions).
+
+Axes of the rest (T-) pose: +X = the body's left, +Y = up, +Z = forward. Every joint angle is an
+intrinsic XYZ Euler triple in the parent's rest frame (radians), converted to SMPL axis-angle.
+Signs (derived from the rest pose, see each limit's comment):
+  hips:      x < 0 swings the leg forward; z > 0 abducts the left leg (to +X), z < 0 the right leg.
+  knees:     x > 0 flexes (shin backwards).
+  spine/neck x > 0 bends forward; y twists; z bends sideways.
+  shoulders: left arm lies along +X: z < 0 lowers it, y < 0 swings it forward;
+             right arm (along -X): z > 0 lowers it, y > 0 swings it forward.
+  elbows:    left y < 0 / right y > 0 flex the forearm forward.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy.spatial.transform import Rotation
+
+from .model import SMPL_JOINT_NAMES
+
+# (min, max) per Euler axis (x, y, z) for each non-root joint; anatomical ranges, slightly conservative.
+JOINT_LIMITS = {
+    "left_hip": ((-2.0, 0.5), (-0.6, 0.6), (-0.45, 0.8)),
+    "right_hip": ((-2.0, 0.5), (-0.6, 0.6), (-0.8, 0.45)),
+    "spine1": ((-0.3, 0.6), (-0.35, 0.35), (-0.3, 0.3)),
+    "left_knee": ((0.0, 2.4), (-0.15, 0.15), (-0.1, 0.1)),
+    "right_knee": ((0.0, 2.4), (-0.15, 0.15), (-0.1, 0.1)),
+    "spine2": ((-0.2, 0.4), (-0.3, 0.3), (-0.25, 0.25)),
+    "left_ankle": ((-0.7, 0.5), (-0.3, 0.3), (-0.3, 0.3)),
+    "right_ankle": ((-0.7, 0.5), (-0.3, 0.3), (-0.3, 0.3)),
+    "spine3": ((-0.2, 0.35), (-0.3, 0.3), (-0.2, 0.2)),
+    "left_foot": ((-0.4, 0.5), (-0.1, 0.1), (-0.1, 0.1)),
+    "right_foot": ((-0.4, 0.5), (-0.1, 0.1), (-0.1, 0.1)),
+    "neck": ((-0.5, 0.7), (-0.7, 0.7), (-0.4, 0.4)),
+    "left_collar": ((-0.2, 0.2), (-0.3, 0.3), (-0.2, 0.4)),
+    "right_collar": ((-0.2, 0.2), (-0.3, 0.3), (-0.4, 0.2)),
+    "head": ((-0.4, 0.5), (-0.6, 0.6), (-0.3, 0.3)),
+    "left_shoulder": ((-1.0, 1.0), (-1.6, 0.7), (-1.5, 1.2)),
+    "right_shoulder": ((-1.0, 1.0), (-0.7, 1.6), (-1.2, 1.5)),
+    "left_elbow": ((-0.8, 0.8), (-2.6, 0.0), (-0.2, 0.2)),
+    "right_elbow": ((-0.8, 0.8), (0.0, 2.6), (-0.2, 0.2)),
+    "left_wrist": ((-0.5, 0.5), (-0.5, 0.5), (-0.9, 0.9)),
+    "right_wrist": ((-0.5, 0.5), (-0.5, 0.5), (-0.9, 0.9)),
+    "left_hand": ((-0.2, 0.2), (-0.2, 0.2), (-0.6, 0.6)),
+    "right_hand": ((-0.2, 0.2), (-0.2, 0.2), (-0.6, 0.6)),
+}
+BODY_JOINTS = SMPL_JOINT_NAMES[1:]
+_LIMITS = np.array([JOINT_LIMITS[j] for j in BODY_JOINTS])  # (23, 3, 2)
+
+
+def euler_to_body_pose(euler: np.ndarray) -> torch.Tensor:
+    """(B, 23, 3) intrinsic XYZ Euler angles -> (B, 69) float32 SMPL body_pose (axis-angle)."""
+    euler = np.asarray(euler, dtype=np.float64)
+    rv = Rotation.from_euler("XYZ", euler.reshape(-1, 3)).as_rotvec()
+    return torch.as_tensor(rv.reshape(euler.shape[0], -1), dtype=torch.float32)
+
+
+def sample_euler(n: int, seed: int | None = None, mode: str = "realistic") -> np.ndarray:
+    """Random joint angles within JOINT_LIMITS, (n, 23, 3).
+
+    mode 'realistic': per angle, with prob. 0.6 a normal around the neutral angle (0 clipped into the
+    limits) with sd 1/4 of the range, else uniform in the range; then clipped to the limits.
+    mode 'extreme': uniform over the full range of every angle (validation of hard poses).
+    """
+    rng = np.random.default_rng(seed)
+    lo, hi = _LIMITS[..., 0], _LIMITS[..., 1]
+    uni = rng.uniform(lo, hi, size=(n, *lo.shape))
+    if mode == "extreme":
+        return uni
+    if mode != "realistic":
+        raise ValueError(f"mode must be 'realistic' or 'extreme', got {mode!r}")
+    centre = np.clip(0.0, lo, hi)
+    gauss = centre + rng.standard_normal((n, *lo.shape)) * (hi - lo) / 4
+    pick = rng.random((n, *lo.shape)) < 0.6
+    return np.clip(np.where(pick, gauss, uni), lo, hi)
+
+
+def sample_poses(n: int, seed: int | None = None, mode: str = "realistic") -> torch.Tensor:
+    """(n, 69) random SMPL body poses within per-joint anatomical limits (see sample_euler)."""
+    return euler_to_body_pose(sample_euler(n, seed, mode))
+
+
+def within_limits(body_pose: torch.Tensor, tol: float = 1e-6) -> torch.Tensor:
+    """(B, 69) -> (B,) bool: every joint's XYZ Euler angles inside JOINT_LIMITS."""
+    e = Rotation.from_rotvec(body_pose.detach().double().reshape(-1, 3).cpu().numpy()).as_euler("XYZ")
+    e = e.reshape(body_pose.shape[0], 23, 3)
+    ok = (e >= _LIMITS[..., 0] - tol) & (e <= _LIMITS[..., 1] + tol)
+    return torch.as_tensor(ok.all(axis=(1, 2)))
+
+
+def _pose(**joints) -> dict:
+    return joints
+
+
+# Named poses: joint -> (x, y, z) Euler radians; joints left out stay at the T-pose.
+NAMED_POSES = {
+    "t_pose": _pose(),
+    "a_pose": _pose(left_shoulder=(0, 0, -0.75), right_shoulder=(0, 0, 0.75)),
+    "arms_down": _pose(left_shoulder=(0, 0, -1.35), right_shoulder=(0, 0, 1.35)),
+    "arms_up": _pose(left_shoulder=(0, 0, 1.2), right_shoulder=(0, 0, -1.2), left_collar=(0, 0, 0.3), right_collar=(0, 0, -0.3)),
+    "sitting": _pose(left_hip=(-1.55, 0, 0.1), right_hip=(-1.55, 0, -0.1), left_knee=(1.55, 0, 0), right_knee=(1.55, 0, 0),
+                     left_shoulder=(0, -0.3, -1.2), right_shoulder=(0, 0.3, 1.2), left_elbow=(0, -0.8, 0), right_elbow=(0, 0.8, 0)),
+    "squatting": _pose(left_hip=(-1.9, 0, 0.35), right_hip=(-1.9, 0, -0.35), left_knee=(2.3, 0, 0), right_knee=(2.3, 0, 0),
+                       left_ankle=(-0.5, 0, 0), right_ankle=(-0.5, 0, 0), spine1=(0.35, 0, 0),
+                       left_shoulder=(0, -1.2, -0.6), right_shoulder=(0, 1.2, 0.6)),
+    "reaching": _pose(right_shoulder=(0, 1.3, -0.5), right_elbow=(0, 0.2, 0), spine2=(0.2, -0.2, 0),
+                      left_shoulder=(0, 0, -1.3)),
+    "arms_crossed": _pose(left_shoulder=(0, -1.1, -1.0), right_shoulder=(0, 1.1, 1.0), left_elbow=(0, -1.9, 0),
+                          right_elbow=(0, 1.9, 0)),
+    "lunge": _pose(left_hip=(-1.3, 0, 0.1), left_knee=(1.4, 0, 0), right_hip=(0.45, 0, -0.1), right_knee=(0.7, 0, 0),
+                   left_shoulder=(0, 0, -1.3), right_shoulder=(0, 0, 1.3)),
+    "walking": _pose(left_hip=(-0.45, 0, 0), right_hip=(0.3, 0, 0), right_knee=(0.4, 0, 0), left_knee=(0.15, 0, 0),
+                     left_shoulder=(0, 0.35, -1.3), right_shoulder=(0, 0.35, 1.3), left_elbow=(0, -0.3, 0),
+                     right_elbow=(0, 0.5, 0)),
+    "hands_on_hips": _pose(left_shoulder=(0, 0.35, -0.9), right_shoulder=(0, -0.35, 0.9), left_elbow=(0, -1.6, 0),
+                           right_elbow=(0, 1.6, 0)),
+    "kneeling": _pose(left_hip=(-1.5, 0, 0.05), left_knee=(1.6, 0, 0), right_hip=(0.0, 0, -0.05), right_knee=(1.6, 0, 0),
+                      right_ankle=(0.5, 0, 0), left_shoulder=(0, 0, -1.3), right_shoulder=(0, 0, 1.3)),
+}
+
+
+def named_pose(name: str) -> torch.Tensor:
+    """(1, 69) body_pose of a named pose (see NAMED_POSES)."""
+    if name not in NAMED_POSES:
+        raise ValueError(f"unknown pose {name!r}; named poses are {sorted(NAMED_POSES)}")
+    e = np.zeros((1, 23, 3))
+    for joint, angles in NAMED_POSES[name].items():
+        e[0, BODY_JOINTS.index(joint)] = angles
+    return euler_to_body_pose(e)
