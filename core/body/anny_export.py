@@ -61,7 +61,12 @@ phalanges -> their finger joints, metacarpals -> wrist, jaw -> jaw, eyes carry n
 J_regressor. Per joint, candidates are the `J_REGRESSOR_PER_DIRECTION` vertices nearest to the joint (on the mean
 body) inside each of `J_REGRESSOR_DIRECTIONS` cones around it, so they surround the joint (a plain nearest-neighbour
 set lies on one side of joints near the surface, e.g. the spine); non-negative least squares (scipy nnls, plus a sum-to-one row weighted `SUM_TO_ONE_WEIGHT`) fits
-V_s @ w = J_s over all shape samples, then rows are renormalised to sum exactly to 1.
+V_s @ w = J_s over all shape samples, then rows are renormalised to sum exactly to 1. Limitation: a convex
+combination of surface vertices cannot follow a joint whose depth under the skin changes with fat/muscle (the spine
+lies close to the back, whose soft tissue thickness varies); the unconstrained least-squares fit is exact (< 0.1
+mm) but has negative weights, which SMPL semantics forbid. Errors (anny_body.json, "j_regressor"): sub-millimetre to
+2 mm for hands, fingers, eyes, jaw and wrists; a few mm on average for the trunk and limbs, up to ~4 cm in the worst
+sampled body for spine3.
 
 Shape space. Phenotypes are drawn from Anny's calibrated `SimpleShapeDistribution` (WHO-calibrated height/weight/
 muscle/proportions given age) with morphological age uniform in `AGE_RANGE_YEARS` (teens to elderly) and gender
@@ -74,7 +79,11 @@ file with fewer than 300 shape columns) plus 10 zero expression columns.
 Determinism. Fixed seeds (torch generator state forked, so the caller's RNG is untouched), fixed orders, float32
 arrays with fixed dtypes, and .npz files written by `save_npz_deterministic` (zip entries sorted, fixed
 date_time, deflate) instead of numpy's savez (which stamps the current time). JSON is written with sorted keys and
-rounded floats.
+rounded floats. `tests/test_anny_export.py::test_export_is_deterministic` exports twice with 48 samples (~15 s);
+the full export (1024 samples) takes ~70 s on 2 CPU cores once Anny's cache (~/.cache/anny) is built (first run:
++~1-2 min to build the jaw rig model data).
+
+Regenerate: ``python -m volsmpl.body.anny_export core/assets 1024``.
 """
 from __future__ import annotations
 
