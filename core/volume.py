@@ -105,7 +105,7 @@ class Volume(torch.nn.Module):
             except AttributeError:  # outputs that take no attributes are re-encoded on every call
                 pass
             if not (out.vertices.requires_grad or out.joints.requires_grad):
-                enc.ref = (out.vertices.detach(), out.joints.detach(), out.full_pose.detach())
+                enc.ref = tuple(t.detach().clone() for t in (out.vertices, out.joints, out.full_pose))
                 self._last = enc
         return enc
 

@@ -78,7 +78,7 @@ def test_surface_samples_on_mesh(body, part):
     assert pts.shape == (1, part.num_parts, 1000, 3)
     mesh = trimesh.Trimesh(out.vertices[0].numpy(), body.faces, process=False)
     _, dist, tri = trimesh.proximity.closest_point(mesh, pts[0].reshape(-1, 3).numpy())
-    assert dist.max() < 1e-5
+    assert dist.max() < 1e-4  # float32 barycentric interpolation at metre scale
     # the first half of each part's samples lies on its own (tight) faces
     tri = tri.reshape(part.num_parts, 1000)
     flab = part.face_labels.numpy()

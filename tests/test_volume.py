@@ -95,7 +95,7 @@ def test_rigid_motion_moves_field(vbody):
     rot = torch.tensor([[0.3, -1.1, 0.4]])
     t = torch.tensor([[0.5, -0.2, 1.0]])
     out2 = vbody(**{**p, "global_orient": rot, "transl": t})
-    R = volsmpl.body.lbs.rodrigues(rot)[0, 0]
+    R = volsmpl.body.lbs.rodrigues(rot)[0]
     j0 = out1.joints[0, 0]
     pts = _near_points(out1, 300, seed=3)
     moved = (pts - j0) @ R.T + j0 + t

@@ -1,7 +1,8 @@
 """Pose sampler and named poses for SMPL-format bodies (24 joints, SMPL conventions).
 
 Axes of the rest (T-) pose: +X = the body's left, +Y = up, +Z = forward. Every joint angle is an
-intrinsic XYZ Euler triple in the parent's rest frame (radians), converted to SMPL axis-angle.
+(x, y, z) intrinsic Euler triple in the parent's rest frame (radians; composed in EULER_ORDER),
+converted to SMPL axis-angle.
 Signs (derived from the rest pose, see each limit's comment):
   hips:      x < 0 swings the leg forward; z > 0 abducts the left leg (to +X), z < 0 the right leg.
   knees:     x > 0 flexes (shin backwards).
@@ -35,8 +36,8 @@ JOINT_LIMITS = {
     "left_collar": ((-0.2, 0.2), (-0.3, 0.3), (-0.2, 0.4)),
     "right_collar": ((-0.2, 0.2), (-0.3, 0.3), (-0.4, 0.2)),
     "head": ((-0.4, 0.5), (-0.6, 0.6), (-0.3, 0.3)),
-    "left_shoulder": ((-1.0, 1.0), (-1.6, 0.7), (-1.5, 1.2)),
-    "right_shoulder": ((-1.0, 1.0), (-0.7, 1.6), (-1.2, 1.5)),
+    "left_shoulder": ((-1.0, 1.0), (-1.5, 0.7), (-1.5, 1.2)),
+    "right_shoulder": ((-1.0, 1.0), (-0.7, 1.5), (-1.2, 1.5)),
     "left_elbow": ((-0.8, 0.8), (-2.6, 0.0), (-0.2, 0.2)),
     "right_elbow": ((-0.8, 0.8), (0.0, 2.6), (-0.2, 0.2)),
     "left_wrist": ((-0.5, 0.5), (-0.5, 0.5), (-0.9, 0.9)),
@@ -46,13 +47,33 @@ JOINT_LIMITS = {
 }
 BODY_JOINTS = SMPL_JOINT_NAMES[1:]
 _LIMITS = np.array([JOINT_LIMITS[j] for j in BODY_JOINTS])  # (23, 3, 2)
+# Composition order per joint: the wide-range axis first, so the middle Euler angle stays inside
+# (-pi/2, pi/2) and every rotation has one Euler triple (elbows flex up to 2.6 rad about y).
+EULER_ORDER = {j: ("YXZ" if j.endswith("elbow") else "XYZ") for j in BODY_JOINTS}
+_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+
+def _rotations(euler: np.ndarray, joint: str) -> Rotation:
+    order = EULER_ORDER[joint]
+    return Rotation.from_euler(order, euler[:, [_AXIS[a] for a in order]])
 
 
 def euler_to_body_pose(euler: np.ndarray) -> torch.Tensor:
-    """(B, 23, 3) intrinsic XYZ Euler angles -> (B, 69) float32 SMPL body_pose (axis-angle)."""
+    """(B, 23, 3) Euler angles (x, y, z) per joint, composed in EULER_ORDER -> (B, 69) float32 body_pose."""
     euler = np.asarray(euler, dtype=np.float64)
-    rv = Rotation.from_euler("XYZ", euler.reshape(-1, 3)).as_rotvec()
+    rv = np.stack([_rotations(euler[:, j], name).as_rotvec() for j, name in enumerate(BODY_JOINTS)], axis=1)
     return torch.as_tensor(rv.reshape(euler.shape[0], -1), dtype=torch.float32)
+
+
+def body_pose_to_euler(body_pose: torch.Tensor) -> np.ndarray:
+    """(B, 69) axis-angle -> (B, 23, 3) Euler angles (x, y, z), inverse of euler_to_body_pose."""
+    rv = body_pose.detach().double().cpu().numpy().reshape(body_pose.shape[0], 23, 3)
+    out = np.empty_like(rv)
+    for j, name in enumerate(BODY_JOINTS):
+        order = EULER_ORDER[name]
+        e = Rotation.from_rotvec(rv[:, j]).as_euler(order)
+        out[:, j, [_AXIS[a] for a in order]] = e
+    return out
 
 
 def sample_euler(n: int, seed: int | None = None, mode: str = "realistic") -> np.ndarray:
@@ -81,9 +102,8 @@ def sample_poses(n: int, seed: int | None = None, mode: str = "realistic") -> to
 
 
 def within_limits(body_pose: torch.Tensor, tol: float = 1e-6) -> torch.Tensor:
-    """(B, 69) -> (B,) bool: every joint's XYZ Euler angles inside JOINT_LIMITS."""
-    e = Rotation.from_rotvec(body_pose.detach().double().reshape(-1, 3).cpu().numpy()).as_euler("XYZ")
-    e = e.reshape(body_pose.shape[0], 23, 3)
+    """(B, 69) -> (B,) bool: every joint's Euler angles inside JOINT_LIMITS."""
+    e = body_pose_to_euler(body_pose)
     ok = (e >= _LIMITS[..., 0] - tol) & (e <= _LIMITS[..., 1] + tol)
     return torch.as_tensor(ok.all(axis=(1, 2)))
 
