@@ -1,0 +1,400 @@
+"""Ground truth (volsmpl.groundtruth) against closed-form and brute-force references."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+
+from volsmpl import groundtruth as gt
+
+try:
+    import open3d  # noqa: F401
+    HAS_O3D, O3D_ERR = True, ""
+except ImportError as e:  # e.g. missing libusb-1.0-0 on slim images
+    HAS_O3D, O3D_ERR = False, str(e)
+needs_o3d = pytest.mark.skipif(not HAS_O3D, reason=f"open3d unavailable: {O3D_ERR}")
+
+
+# ------------------------------------------------------------------ independent references
+def box_sdf(p, half):
+    """Exact SDF of an axis-aligned box centred at 0 with half extents `half`."""
+    q = np.abs(p) - half
+    return np.linalg.norm(np.maximum(q, 0), axis=-1) + np.minimum(q.max(axis=-1), 0)
+
+
+def closest_point_on_triangles(p, a, b, c):
+    """Closest points (N, F, 3) of points p (N, 3) to triangles (a, b, c) each (F, 3), by Voronoi regions."""
+    p = p[:, None]
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = (ab * ap).sum(-1), (ac * ap).sum(-1)
+    bp = p - b
+    d3, d4 = (ab * bp).sum(-1), (ac * bp).sum(-1)
+    cp = p - c
+    d5, d6 = (ab * cp).sum(-1), (ac * cp).sum(-1)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        denom = va + vb + vc
+        v_in, w_in = vb / denom, vc / denom
+        out = a + ab * v_in[..., None] + ac * w_in[..., None]  # interior
+        t_ab = d1 / (d1 - d3)
+        t_ac = d2 / (d2 - d6)
+        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+    bc = c - b
+    region = [  # Ericson's order: the first region that applies wins
+        ((d1 <= 0) & (d2 <= 0), lambda: np.broadcast_to(a, out.shape)),
+        ((d3 >= 0) & (d4 <= d3), lambda: np.broadcast_to(b, out.shape)),
+        ((vc <= 0) & (d1 >= 0) & (d3 <= 0), lambda: a + ab * t_ab[..., None]),
+        ((d6 >= 0) & (d5 <= d6), lambda: np.broadcast_to(c, out.shape)),
+        ((vb <= 0) & (d2 >= 0) & (d6 <= 0), lambda: a + ac * t_ac[..., None]),
+        ((va <= 0) & ((d4 - d3) >= 0) & ((d5 - d6) >= 0), lambda: b + bc * t_bc[..., None]),
+    ]
+    for mask, value in reversed(region):  # applied last = highest priority
+        with np.errstate(divide="ignore", invalid="ignore"):
+            out = np.where(mask[..., None], value(), out)
+    return out
+
+
+def brute_distance(p, vertices, faces):
+    tri = vertices[faces]
+    cp = closest_point_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
+    return np.linalg.norm(cp - p[:, None], axis=-1).min(axis=1)
+
+
+def voxel_mesh(cells):
+    """Closed, outward-oriented surface of a union of unit cubes at integer `cells` (shared grid vertices)."""
+    occ = {tuple(c) for c in cells}
+    verts, faces = {}, []
+    vid = lambda x: verts.setdefault(tuple(x), len(verts))
+    for c in occ:
+        for axis in range(3):
+            for s in (-1, 1):
+                nb = list(c)
+                nb[axis] += s
+                if tuple(nb) in occ:
+                    continue
+                u, w = [(axis + 1) % 3, (axis + 2) % 3]
+                base = np.array(c, float)
+                base[axis] += (s + 1) / 2
+                corners = []
+                for du, dw in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                    x = base.copy()
+                    x[u] += du
+                    x[w] += dw
+                    corners.append(vid(x))
+                q = corners if s > 0 else corners[::-1]
+                faces += [[q[0], q[1], q[2]], [q[0], q[2], q[3]]]
+    v = np.zeros((len(verts), 3))
+    for x, i in verts.items():
+        v[i] = x
+    return v, np.array(faces)
+
+
+L_CELLS = [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (0, 2, 0), (0, 2, 1)]  # non-convex, L with a raised arm
+
+
+def inside_cells(p, cells):
+    return np.isin(np.floor(p).astype(int).view([("", int)] * 3).ravel(),
+                   np.array(cells).view([("", int)] * 3).ravel())
+
+
+def off_surface(p, vertices, faces, eps=1e-3):
+    return brute_distance(p, vertices, faces) > eps
+
+
+@pytest.fixture(scope="module")
+def rng():
+    return np.random.default_rng(0)
+
+
+@pytest.fixture(scope="module")
+def cube():
+    m = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    m = trimesh.creation.icosphere(subdivisions=2, radius=0.5)
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+# ------------------------------------------------------------------ the reference itself
+def test_brute_reference_on_cube(cube, rng):
+    p = rng.uniform(-1, 1, (400, 3))
+    np.testing.assert_allclose(brute_distance(p, *cube), np.abs(box_sdf(p, 0.5)), atol=1e-12)
+
+
+# ------------------------------------------------------------------ winding numbers
+@pytest.mark.parametrize("shape", ["cube", "sphere", "L"])
+def test_winding_number_is_indicator(shape, cube, sphere, rng):
+    if shape == "L":
+        v, f = voxel_mesh(L_CELLS)
+        p = rng.uniform(-0.5, 3.5, (1500, 3))
+        inside = inside_cells(p, L_CELLS)
+    else:
+        v, f = cube if shape == "cube" else sphere
+        p = rng.uniform(-0.65, 0.65, (1500, 3))
+        inside = box_sdf(p, 0.5) < 0 if shape == "cube" else None
+    keep = off_surface(p, v, f)
+    p = p[keep]
+    w = gt.winding_number(v, f, p)
+    if inside is None:  # convex icosphere: inside iff behind every face plane
+        tri = v[f]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        inside = (np.einsum("nfi,fi->nf", p[:, None] - tri[None, :, 0], n) < 0).all(axis=1)
+    else:
+        inside = inside[keep]
+    assert 0.05 < inside.mean() < 0.8
+    np.testing.assert_allclose(w, inside.astype(float), atol=1e-9)
+
+
+def test_winding_fast_matches_direct(sphere, rng):
+    v, f = sphere
+    p = rng.normal(0, 0.5, (300, 3))
+    fast = gt.winding_number(v, f, p, chunk=5000)  # several blocks
+    direct = gt._winding_direct(torch.as_tensor(v[f]), torch.as_tensor(p)).numpy()
+    np.testing.assert_allclose(fast, direct, atol=1e-10)
+
+
+def test_winding_open_mesh_is_fractional(cube):
+    v, f = cube
+    w = gt.winding_number(v, f[2:], np.zeros((1, 3)))  # one square side removed: the centre sees 5/6 of the sphere
+    np.testing.assert_allclose(w, [5 / 6], atol=1e-12)
+
+
+def test_winding_torch_in_torch_out(cube):
+    v, f = cube
+    p = torch.zeros(2, 5, 3, dtype=torch.float32)
+    w = gt.winding_number(torch.as_tensor(v), torch.as_tensor(f), p)
+    assert torch.is_tensor(w) and w.shape == (2, 5) and w.dtype == torch.float32
+    assert torch.allclose(w, torch.ones(2, 5))
+
+
+# ------------------------------------------------------------------ signed distance
+@needs_o3d
+@pytest.mark.parametrize("sign", ["raycast", "winding"])
+def test_cube_sdf_exact(cube, sign, rng):
+    p = np.concatenate([rng.uniform(-1.0, 1.0, (1500, 3)), rng.uniform(-0.52, 0.52, (500, 3))])
+    d = gt.mesh_sdf(*cube, p, sign=sign)
+    ref = box_sdf(p, 0.5)
+    sure = np.abs(ref) > 1e-5
+    np.testing.assert_allclose(d[sure], ref[sure], atol=2e-6)
+    np.testing.assert_allclose(np.abs(d), np.abs(ref), atol=2e-6)
+
+
+@needs_o3d
+def test_sphere_sdf_matches_brute_force(sphere, rng):
+    v, f = sphere
+    p = rng.uniform(-0.8, 0.8, (800, 3))
+    d = gt.mesh_sdf(v, f, p)
+    ref = brute_distance(p, v, f)
+    np.testing.assert_allclose(np.abs(d), ref, atol=2e-6)
+    w = gt.winding_number(v, f, p)
+    sure = ref > 1e-5
+    np.testing.assert_array_equal(d[sure] < 0, w[sure] > 0.5)
+
+
+@needs_o3d
+@pytest.mark.parametrize("nsamples", [1, 5])
+def test_raycast_sign_agrees_with_winding(nsamples, rng):
+    v, f = voxel_mesh(L_CELLS)  # grid points make ray hits on edges/vertices likely: worst case for parity
+    p = np.concatenate([rng.uniform(-0.5, 3.5, (2000, 3)), np.round(rng.uniform(-0.5, 3.5, (500, 3)) * 4) / 4 + 0.125])
+    p = p[off_surface(p, v, f, 1e-4)]
+    d = gt.mesh_sdf(v, f, p, sign="raycast", nsamples=nsamples)
+    w = gt.winding_number(v, f, p)
+    agree = (d < 0) == (w > 0.5)
+    assert agree.mean() >= (0.995 if nsamples == 1 else 1.0)
+    assert (np.round(w) == inside_cells(p, L_CELLS)).all()
+
+
+@needs_o3d
+def test_torch_dtype_device_and_shapes(cube):
+    v, f = (torch.as_tensor(x) for x in cube)
+    p = torch.zeros(3, 4, 3, dtype=torch.float64)
+    d = gt.mesh_sdf(v, f, p)
+    assert torch.is_tensor(d) and d.shape == (3, 4) and d.dtype == torch.float64
+    assert torch.allclose(d, torch.full((3, 4), -0.5, dtype=torch.float64), atol=1e-6)
+    e = gt.mesh_sdf(v, f, torch.zeros(0, 3))
+    assert torch.is_tensor(e) and e.shape == (0,)
+    assert gt.mesh_sdf(*cube, np.zeros((0, 3))).shape == (0,)
+    assert gt.batch_mesh_sdf(v[None], f, torch.zeros(1, 0, 3)).shape == (1, 0)
+
+
+@needs_o3d
+def test_batch_matches_single(cube, sphere, rng):
+    v, f = sphere
+    verts = np.stack([v, v * 1.5 + 0.1, v[:, [1, 2, 0]]])
+    p = rng.uniform(-0.9, 0.9, (3, 600, 3))
+    d = gt.batch_mesh_sdf(torch.as_tensor(verts), torch.as_tensor(f), torch.as_tensor(p, dtype=torch.float32))
+    assert d.shape == (3, 600) and d.dtype == torch.float32
+    for i in range(3):
+        np.testing.assert_allclose(d[i].numpy(), gt.mesh_sdf(verts[i], f, p[i]), atol=1e-6)
+    dw = gt.batch_mesh_sdf(verts, f, p, sign="winding")
+    sure = np.abs(dw) > 1e-5
+    np.testing.assert_array_equal(np.sign(dw[sure]), np.sign(d.numpy()[sure]))
+
+
+@needs_o3d
+def test_errors(cube):
+    v, f = cube
+    with pytest.raises(ValueError, match="non-finite"):
+        gt.mesh_sdf(v, f, np.array([[0.0, np.nan, 0.0]]))
+    with pytest.raises(ValueError, match="not closed.*boundary edges"):
+        gt.mesh_sdf(v, f[1:], np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="oriented inward"):
+        gt.mesh_sdf(v, f[:, ::-1], np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="inconsistently"):
+        g = f.copy()
+        g[0] = g[0, ::-1]
+        gt.mesh_sdf(v, g, np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="odd"):
+        gt.mesh_sdf(v, f, np.zeros((1, 3)), nsamples=4)
+    with pytest.raises(ValueError, match="sign="):
+        gt.mesh_sdf(v, f, np.zeros((1, 3)), sign="parity")
+    with pytest.raises(ValueError, match="same B"):
+        gt.batch_mesh_sdf(v[None], f, np.zeros((2, 5, 3)))
+    # holes tolerated by the winding number when asked to
+    d = gt.mesh_sdf(v, f[2:], np.array([[0.0, 0.0, 0.1]]), sign="winding", check_closed=False)
+    assert d[0] < 0
+
+
+# ------------------------------------------------------------------ training query sampler
+def random_rotations(n, gen):
+    q = torch.randn(n, 4, generator=gen, dtype=torch.float64)
+    q = q / q.norm(dim=-1, keepdim=True)
+    w, x, y, z = q.unbind(-1)
+    return torch.stack([
+        1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w),
+        2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w),
+        2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1).reshape(n, 3, 3)
+
+
+@pytest.fixture(scope="module")
+def two_part_scene():
+    """Two disjoint boxes (2 bodies, 2 parts) with random part frames and boxes."""
+    a = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
+    b = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    b.apply_translation((5.0, 0, 0))
+    v = np.concatenate([a.vertices, b.vertices])
+    f = np.concatenate([a.faces, b.faces + len(a.vertices)])
+    gen = torch.Generator().manual_seed(3)
+    B, K = 2, 2
+    G = torch.eye(4, dtype=torch.float64).repeat(B, K, 1, 1)
+    G[..., :3, :3] = random_rotations(B * K, gen).reshape(B, K, 3, 3)
+    G[..., :3, 3] = torch.randn(B, K, 3, generator=gen, dtype=torch.float64)
+    lo = -torch.rand(B, K, 3, generator=gen, dtype=torch.float64) - 0.1
+    hi = torch.rand(B, K, 3, generator=gen, dtype=torch.float64) + 0.1
+    verts = torch.as_tensor(np.stack([v, v]))
+    parts = [np.arange(len(a.faces)), np.arange(len(a.faces), len(f))]
+    return verts, torch.as_tensor(f), G, lo, hi, parts
+
+
+def test_sampler_uniform_points_in_their_boxes(two_part_scene):
+    from volsmpl.partition import Partition
+    verts, f, G, lo, hi, parts = two_part_scene
+    nu, ns = 300, 50
+    q = gt.sample_training_queries(verts, f, G, lo, hi, n_uniform=nu, n_surface=ns, face_ids_per_part=parts,
+                                   generator=torch.Generator().manual_seed(0))
+    assert q.shape == (2, 2 * (nu + ns), 3) and q.dtype == verts.dtype
+    per_part = q.reshape(2, 2, nu + ns, 3)[:, :, :nu]  # (B, K, nu, 3)
+    for k in range(2):
+        local = Partition.canonicalize(per_part[:, k], G)[:, k]  # into part k's frame
+        assert (local >= lo[:, k, None] - 1e-9).all() and (local <= hi[:, k, None] + 1e-9).all()
+        # uniform: each coordinate's mean is the box centre (300 samples: ~5 sigma band)
+        centre, size = 0.5 * (lo[:, k] + hi[:, k]), hi[:, k] - lo[:, k]
+        assert ((local.mean(1) - centre).abs() < 0.1 * size).all()
+        # and they fill the box: the samples reach near every side
+        assert ((local.amin(1) - lo[:, k]) < 0.05 * size).all() and ((hi[:, k] - local.amax(1)) < 0.05 * size).all()
+
+
+@needs_o3d
+def test_sampler_surface_points_on_their_part_with_sigma(two_part_scene):
+    verts, f, G, lo, hi, parts = two_part_scene
+    ns = 4000
+    sigma = (0.01, 0.03)
+    q = gt.sample_training_queries(verts, f, G, lo, hi, n_uniform=0, n_surface=ns, sigma=sigma,
+                                   face_ids_per_part=parts, generator=torch.Generator().manual_seed(1))
+    q = q.reshape(2, 2, ns, 3)
+    a = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
+    for k, (centre, half) in enumerate([(np.zeros(3), 1.0), (np.array([5.0, 0, 0]), 0.5)]):
+        pts = q[0, k].numpy()
+        assert np.abs(pts - centre).max() < half + 0.2  # all around part k's own box, not the other part
+        sdf = box_sdf(pts - centre, half)
+        np.testing.assert_allclose(gt.mesh_sdf(verts[0].numpy(), f.numpy(), pts[:500]), sdf[:500], atol=2e-6)
+        # normal component of isotropic noise ~ N(0, sigma^2) on (mostly) flat faces
+        for (s, block) in zip(sigma, (sdf[: ns // 2], sdf[ns // 2:])):
+            assert abs(block.std() / s - 1) < 0.12, (k, s, block.std())
+            assert abs(block.mean()) < 0.15 * s
+    assert a.area > 0
+
+
+def test_sampler_without_part_faces_and_sigma_zero(two_part_scene):
+    verts, f, G, lo, hi, _ = two_part_scene
+    q = gt.sample_training_queries(verts, f, G, lo, hi, n_uniform=0, n_surface=3000, sigma=0.0,
+                                   generator=torch.Generator().manual_seed(2))
+    pts = q[1].numpy()
+    d = np.minimum(np.abs(box_sdf(pts, 1.0)), np.abs(box_sdf(pts - [5.0, 0, 0], 0.5)))
+    assert d.max() < 1e-9
+    # whole-mesh area weighting: the big box has 4x the area of the small one
+    frac_big = (pts[:, 0] < 2.5).mean()
+    assert abs(frac_big - 0.8) < 0.03
+
+
+def test_sampler_reproducible_and_typed(two_part_scene):
+    verts, f, G, lo, hi, parts = two_part_scene
+    run = lambda seed, **kw: gt.sample_training_queries(verts, f, G, lo, hi, n_uniform=16, n_surface=16,
+                                                        face_ids_per_part=parts,
+                                                        generator=torch.Generator().manual_seed(seed), **kw)
+    assert torch.equal(run(5), run(5))
+    assert not torch.allclose(run(5), run(6))
+    q32 = gt.sample_training_queries(verts.float(), f, G.float(), lo.float(), hi.float(), n_uniform=4, n_surface=6,
+                                     generator=torch.Generator().manual_seed(5))
+    assert q32.dtype == torch.float32 and q32.shape == (2, 20, 3)
+    qn = gt.sample_training_queries(verts.numpy(), f.numpy(), G.numpy(), lo.numpy(), hi.numpy(), n_uniform=4,
+                                    n_surface=6, generator=torch.Generator().manual_seed(5))
+    assert isinstance(qn, np.ndarray) and qn.shape == (2, 20, 3)
+    with pytest.raises(ValueError, match="box_max < box_min"):
+        gt.sample_training_queries(verts, f, G, hi, lo)
+    with pytest.raises(ValueError, match="sigma"):
+        gt.sample_training_queries(verts, f, G, lo, hi, sigma=-1.0)
+    with pytest.raises(ValueError, match="face_ids_per_part"):
+        gt.sample_training_queries(verts, f, G, lo, hi, face_ids_per_part=parts[:1])
+
+
+# ------------------------------------------------------------------ the default body
+@pytest.fixture(scope="module")
+def default_body_mesh():
+    from volsmpl.body.model import DEFAULT_BODY_FILE
+    if not DEFAULT_BODY_FILE.exists():
+        pytest.skip("default body asset not exported yet")
+    import volsmpl
+    body = volsmpl.create_body()
+    gen = torch.Generator().manual_seed(0)
+    out = body(body_pose=0.3 * torch.randn(1, 69, generator=gen))
+    return body, out
+
+
+@needs_o3d
+def test_default_body_raycast_sign_matches_winding(default_body_mesh):
+    from volsmpl.partition import Partition
+    body, out = default_body_mesh
+    v, f = out.vertices.detach(), torch.as_tensor(np.asarray(body.faces))
+    assert gt.closed_mesh_problems(f) is None
+    part = Partition(body, n_samples=8)
+    G = part.part_transforms(out.full_pose, out.joints)
+    lo, hi = part.boxes(v, G)
+    q = gt.sample_training_queries(v, f, G, lo, hi, n_uniform=42, n_surface=42, face_ids_per_part=part.tight_face_ids,
+                                   generator=torch.Generator().manual_seed(0))[0]
+    q = q[torch.randperm(len(q), generator=torch.Generator().manual_seed(1))[:2000]]
+    d = gt.mesh_sdf(v[0], f, q)
+    w = gt.winding_number(v[0], f, q)
+    assert ((w - w.round()).abs() < 1e-6).all()  # closed mesh: integer winding numbers (self-intersections give 2)
+    sure = d.abs() > 1e-5
+    simple = sure & (w.round().abs() <= 1)
+    assert simple.float().mean() > 0.95
+    assert torch.equal((d[simple] < 0), (w[simple] > 0.5))
+    # where the posed mesh overlaps itself (w = 2) ray parity counts an even number of crossings: only there may
+    # the two disagree, and the winding number (union semantics) is the one that calls the point inside
+    assert ((d[sure] < 0) != (w[sure] > 0.5)).le(w[sure].round() >= 2).all()
+    assert 0.2 < (d < 0).float().mean() < 0.8
