@@ -20,7 +20,7 @@ demo: $(STAMP)
 	$(VENV)/bin/volsmpl demo --out out
 
 test: $(STAMP)
-	$(PY) -m pytest -q -ra
+	$(PY) -m pytest -q -ra --durations=8
 
 clean:
 	rm -rf out .pytest_cache

@@ -252,7 +252,7 @@ class Volume(torch.nn.Module):
             raise RuntimeError("the SDF has no zero crossing in the body's box: the model is untrained or broken.")
         spacing = ((hi - lo) / (resolution - 1)).cpu().numpy()
         verts, faces, _, _ = marching_cubes(sdf, level=0.0, spacing=tuple(spacing))
-        return trimesh.Trimesh(verts + lo.cpu().numpy(), faces[:, ::-1], process=False)
+        return trimesh.Trimesh(verts + lo.cpu().numpy(), faces, process=False)  # skimage winds them outward for an SDF
 
 
 def _select(out, b: int):
