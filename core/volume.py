@@ -165,8 +165,10 @@ class Volume(torch.nn.Module):
         Args: out: body output (B bodies); points: (B, N, 3) or (N, 3) shared by all bodies.
         Returns: (B, N); an empty (B, 0) for N = 0.
         """
-        enc = self.encode(out)
-        points = check_points(points, out.vertices)
+        return self.query_encoded(self.encode(out), check_points(points, out.vertices), dense)
+
+    def query_encoded(self, enc: Encoding, points: torch.Tensor, dense: bool | None = None) -> torch.Tensor:
+        """`query` on an explicit encoding (training encodes with fresh surface samples). points (B, N, 3) -> (B, N)."""
         dense = self.dense if dense is None else dense
         B, N = points.shape[:2]
         res = []
