@@ -74,15 +74,16 @@ def closed_mesh_problems(faces) -> str | None:
     """
     f = _to_numpy(faces, "faces", np.int64)
     directed = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    n = int(f.max()) + 1
     und = np.sort(directed, axis=1)
-    _, und_counts = np.unique(und, axis=0, return_counts=True)
+    _, und_counts = np.unique(und[:, 0] * n + und[:, 1], return_counts=True)  # 1-D keys: fast unique
     problems = []
     n_boundary, n_nonmanifold = int((und_counts == 1).sum()), int((und_counts > 2).sum())
     if n_boundary:
         problems.append(f"{n_boundary} boundary edges (holes)")
     if n_nonmanifold:
         problems.append(f"{n_nonmanifold} edges shared by more than two faces")
-    _, dir_counts = np.unique(directed, axis=0, return_counts=True)
+    _, dir_counts = np.unique(directed[:, 0] * n + directed[:, 1], return_counts=True)
     n_flipped = int((dir_counts > 1).sum())
     if n_flipped and not n_nonmanifold:
         problems.append(f"{n_flipped} edges whose two faces are oriented inconsistently")
@@ -276,8 +277,9 @@ def batch_mesh_sdf(vertices, faces, points, sign: str = "raycast", nsamples: int
         vertices (B, V, 3), faces (F, 3), points (B, N, 3): numpy or torch. Other arguments as `mesh_sdf`.
     Returns:
         (B, N) signed distances (negative inside), torch on the points' device/dtype for torch points.
-    Timing (2 CPU cores, V=13k, F=27k, N=60k, 'raycast', nsamples=5): see tests / the module report; the
-    scene build is a few tens of ms and the query dominates.
+    Timing (2 CPU cores, default body V=13k, F=27k, N=60k, 'raycast', nsamples=5): ~10 ms BVH build (lazy,
+    on the first query), ~75 ms unsigned distance, ~110 ms signed; ~125 ms per body in all. 'winding' adds
+    ~1 minute per body at this size (O(N*F)).
     """
     _validate_sign(sign, nsamples)
     v = _to_numpy(vertices, "vertices", np.float64)

@@ -398,3 +398,17 @@ def test_default_body_raycast_sign_matches_winding(default_body_mesh):
     # the two disagree, and the winding number (union semantics) is the one that calls the point inside
     assert ((d[sure] < 0) != (w[sure] > 0.5)).le(w[sure].round() >= 2).all()
     assert 0.2 < (d < 0).float().mean() < 0.8
+
+
+def test_surface_samples_uniform_on_a_triangle():
+    v = torch.tensor([[[0.0, 0, 0], [2.0, 0, 0], [0.5, 1.5, 0], [9, 9, 9]]], dtype=torch.float64)
+    f = torch.tensor([[0, 1, 2], [0, 1, 3]])
+    pts = gt.sample_surface(v, f, 20000, face_ids_per_part=[[0]], generator=torch.Generator().manual_seed(0))[0, 0]
+    assert pts.shape == (20000, 3) and (pts[:, 2] == 0).all()
+    # barycentric coordinates of a uniform sample: each has mean 1/3 and second moment 1/6
+    A = (v[0, :3, :2] - v[0, 2, :2])[:2].T
+    lam01 = torch.linalg.solve(A, (pts[:, :2] - v[0, 2, :2]).T).T
+    lam = torch.cat([lam01, 1 - lam01.sum(1, keepdim=True)], dim=1)
+    assert (lam > -1e-12).all()
+    assert torch.allclose(lam.mean(0), torch.full((3,), 1 / 3, dtype=torch.float64), atol=0.01)
+    assert torch.allclose((lam ** 2).mean(0), torch.full((3,), 1 / 6, dtype=torch.float64), atol=0.01)
