@@ -10,6 +10,7 @@ import sys
 SUBCOMMANDS = {
     "body": "volsmpl.body.cli",
     "demo": "volsmpl.demo",
+    "eval": "volsmpl.evaluate",
     "train": "volsmpl.train",
 }
 
