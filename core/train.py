@@ -56,6 +56,8 @@ class TrainConfig:
     pose_mode: str = "realistic"
     global_orient_scale: float = 0.0  # rad sd of random global orientation (parts are in local frames anyway)
     gt_rays: int = 5                # ray-voting rays for the ground-truth sign
+    micro_batch: int = 2            # bodies per forward/backward; gradients accumulate to the same full-batch step
+    encoder_bf16: bool = False      # bfloat16 autocast of the PointNet encoder (CPU speed; see VolumetricSMPLNet)
     seed: int = 0
     ckpt_every: int = 200
     log_every: int = 10
@@ -131,6 +133,30 @@ class TrainStep(torch.nn.Module):
         enc = self._volume.encode(out, generator=g)  # fresh surface samples: augmentation
         pred = self._volume.query_encoded(enc, batch["points"])
         return sdf_loss(pred, batch["sdf"], self.cfg)
+
+
+def _accumulate(model, batch: dict, micro: int, ddp: bool) -> tuple[float, dict]:
+    """Forward/backward the batch in chunks of `micro` bodies, accumulating gradients of the full-batch
+    mean loss (every body has the same number of points, so the chunk means weigh B_c / B). Returns
+    the loss and its parts as floats. Exact: same gradient as one pass, less peak memory, faster on CPU."""
+    import contextlib
+
+    B = batch["points"].shape[0]
+    idx = list(range(0, B, max(1, micro)))
+    loss, parts = 0.0, {"sign": 0.0, "abs": 0.0}
+    for i, s in enumerate(idx):
+        e = min(B, s + max(1, micro))
+        sub = {"params": {k: v[s:e] for k, v in batch["params"].items()}, "points": batch["points"][s:e],
+               "sdf": batch["sdf"][s:e], "seed": batch["seed"] * 7919 + i}
+        sync = contextlib.nullcontext() if (not ddp or i == len(idx) - 1) else model.no_sync()
+        with sync:
+            l, p = model(sub)
+            w = (e - s) / B
+            (l * w).backward()
+        loss += float(l.detach()) * w
+        for k in parts:
+            parts[k] += p[k] * w
+    return loss, parts
 
 
 # ---------------------------------------------------------------------- checkpoints
@@ -229,6 +255,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         start = meta["training"]["step"]
     volume.to(device)
     volume.train()
+    volume.net.encoder_bf16 = cfg.encoder_bf16
     step_mod = TrainStep(body.to(device), volume, cfg)
     model = torch.nn.parallel.DistributedDataParallel(step_mod) if world > 1 else step_mod
     if rank == 0:
@@ -250,12 +277,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         data_sec = time.time() - td
         for g_ in opt.param_groups:
             g_["lr"] = lr_at(cfg, step)
-        loss_t, parts = model(batch)
-        loss = float(loss_t.detach())
+        opt.zero_grad(set_to_none=True)
+        loss, parts = _accumulate(model, batch, cfg.micro_batch, world > 1)
         if not math.isfinite(loss):  # before the update, so the last checkpoint stays sound
             raise RuntimeError(f"loss became {loss} at step {step}; lower the learning rate or check the data.")
-        opt.zero_grad(set_to_none=True)
-        loss_t.backward()
         opt.step()
         losses.append(loss)
         last = {"step": step + 1, "loss": loss, **parts}

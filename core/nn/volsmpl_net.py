@@ -38,11 +38,17 @@ class VolumetricSMPLNet(nn.Module):
         self.num_parts = num_parts
         self.encoder = ResnetPointNet.from_config(self.config)
         self.decoder = NBWDecoder.from_config(self.config, num_parts, share_shapes=self.config.nbw_shared_shapes)
+        # bfloat16 autocast of the PointNet encoder (float32 inputs only): ~3x faster on CPUs with
+        # AVX512-BF16; used for training throughput, off by default (inference stays float32).
+        self.encoder_bf16 = False
 
     def encode(self, local_surface: torch.Tensor) -> PartCode:
         """local_surface (B, K, P, 3) part surface samples in part frames -> PartCode."""
         B, K, P, _ = local_surface.shape
-        z = self.encoder(local_surface.reshape(B * K, P, 3)).reshape(B, K, -1)
+        x = local_surface.reshape(B * K, P, 3)
+        with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=self.encoder_bf16 and x.dtype == torch.float32):
+            z = self.encoder(x)
+        z = z.to(local_surface.dtype).reshape(B, K, -1)
         return PartCode(z, self.decoder.generate(z))
 
     def decode_dense(self, x_local: torch.Tensor, code: PartCode) -> torch.Tensor:
