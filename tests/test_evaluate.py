@@ -1,0 +1,228 @@
+"""Evaluation protocol: fixed validation set, query points, metrics against independent references, CLI."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import volsmpl
+from volsmpl import evaluate as ev
+from volsmpl.body.poses import NAMED_POSES, named_pose, within_limits
+from volsmpl.body.shapes import PHENOTYPES, shape_bank
+from volsmpl.checkpoint import save_checkpoint
+from volsmpl.groundtruth import batch_mesh_sdf
+
+SMALL = dict(n_bodies=2, n_points=4000)
+
+
+# ---------------------------------------------------------------------------------------------- validation set
+def test_validation_set_bit_identical_and_seeded():
+    a, b = ev.validation_bodies(8), ev.validation_bodies(8)
+    assert ev.digest(a) == ev.digest(b)
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    other = ev.validation_bodies(8, seed=ev.VAL_SEED + 1)
+    assert ev.digest(other) != ev.digest(a)
+    assert not torch.equal(other["body_pose"], a["body_pose"])
+    # body i does not depend on n: a smaller set is a prefix
+    small = ev.validation_bodies(3)
+    assert all(torch.equal(small[k], a[k][:3]) for k in a)
+    # the digest sees every byte
+    a["transl"][5, 1] = torch.nextafter(a["transl"][5, 1], torch.tensor(10.0))
+    assert ev.digest(a) != ev.digest(b)
+
+
+def test_validation_set_composition():
+    n = 64
+    bodies = ev.validation_bodies(n)
+    labels = ev.validation_labels(n)
+    assert {k: tuple(v.shape) for k, v in bodies.items()} == {
+        "betas": (n, 10), "global_orient": (n, 3), "body_pose": (n, 69), "transl": (n, 3)}
+    assert all(v.dtype == torch.float32 for v in bodies.values())
+    named = [i for i, lab in enumerate(labels) if lab.startswith("named:")]
+    assert len(named) == len(NAMED_POSES) == 12
+    for i in named:  # exactly the named pose
+        name = labels[i].split("/")[0].split(":")[1]
+        assert torch.equal(bodies["body_pose"][i:i + 1], named_pose(name))
+    assert sorted(lab.split("/")[0].split(":")[1] for lab in np.array(labels)[named]) == sorted(NAMED_POSES)
+    extreme = [i for i, lab in enumerate(labels) if lab.startswith("extreme/")]
+    assert len(extreme) == n - 12
+    assert bool(within_limits(bodies["body_pose"][extreme], tol=1e-4).all())
+    # extreme poses spread over the joint ranges: far from the realistic sampler's neutral mass
+    assert bodies["body_pose"][extreme].abs().mean() > 0.3
+    # shapes: each betas row is a row of the population bank in the labelled group
+    bank = shape_bank()
+    heights, gender = bank["heights_m"], bank["phenotypes"][:, PHENOTYPES.index("gender")]
+    counts = {}
+    for i, lab in enumerate(labels):
+        group = lab.split("/")[1]
+        counts[group] = counts.get(group, 0) + 1
+        rows = np.nonzero((np.abs(bank["betas"][:, :10] - bodies["betas"][i].numpy()) < 1e-6).all(1))[0]
+        assert len(rows) >= 1, f"body {i} betas are not from the shape bank"
+        h, g = heights[rows[0]], gender[rows[0]]
+        assert {"tall": h >= 1.85, "short": h <= 1.55, "male": g <= 0.25, "female": g >= 0.75}[group], (i, lab, h, g)
+    assert counts == {"tall": 16, "short": 16, "male": 16, "female": 16}
+    # global orientation: proper rotation vectors, not all near identity; translations in the documented cube
+    angles = bodies["global_orient"].norm(dim=1)
+    assert (angles <= np.pi + 1e-5).all() and angles.mean() > 1.0
+    assert (bodies["transl"].abs() <= 0.5).all()
+
+
+# ---------------------------------------------------------------------------------------------- query points
+@pytest.fixture(scope="module")
+def posed(body):
+    bodies = ev.validation_bodies(2)
+    return bodies, ev.pose_bodies(body, bodies)
+
+
+def test_query_points_protocol(body, posed):
+    _, verts = posed
+    pts, surf = ev.query_points(verts, body.faces, 6000, surface_sigma=0.01, bbox_padding=0.05)
+    assert pts.shape == (2, 6000, 3) and pts.dtype == torch.float32
+    assert int(surf.sum()) == 3000 and not surf[:3000].any()
+    again, _ = ev.query_points(verts, body.faces, 6000)
+    assert torch.equal(pts, again)
+    one, _ = ev.query_points(verts[1:], body.faces, 6000, seed=ev.VAL_SEED)
+    assert not torch.equal(one[0], pts[1])  # body index, not content, selects the stream ...
+    first, _ = ev.query_points(verts[:1], body.faces, 6000)
+    assert torch.equal(first[0], pts[0])  # ... so a batch prefix gives the same points
+    assert not torch.equal(ev.query_points(verts, body.faces, 6000, seed=1)[0], pts)
+    for b in range(2):
+        lo, hi = verts[b].amin(0) - 0.05, verts[b].amax(0) + 0.05
+        u = pts[b, ~surf]
+        assert ((u >= lo - 1e-6) & (u <= hi + 1e-6)).all()
+        # fills the box: per-axis range close to the box size
+        assert ((u.amax(0) - u.amin(0)) > 0.95 * (hi - lo)).all()
+    # near-surface points: exact distance to the mesh has the scale of sigma (|normal offset|: mean 0.8 sigma)
+    d = batch_mesh_sdf(verts, body.faces, pts).abs()
+    ds, du = d[:, surf], d[:, ~surf]
+    assert 0.004 < float(ds.mean()) < 0.011, float(ds.mean())
+    assert float(du.mean()) > 0.04
+
+
+# ---------------------------------------------------------------------------------------------- metrics
+def test_iou_hand_computed():
+    pred = torch.tensor([[True, True, False, False, True], [False] * 5, [True, False, False, False, False]])
+    gt = torch.tensor([[True, False, True, False, True], [False] * 5, [False, True, False, False, False]])
+    out = ev.iou(pred, gt)
+    assert out.tolist() == [2 / 4, 1.0, 0.0]
+    with pytest.raises(ValueError, match="equal shapes"):
+        ev.iou(pred[:, :3], gt)
+
+
+def test_metrics_hand_computed():
+    gt = torch.tensor([[-0.1, 0.2, -0.3, 0.4]])
+    pred = torch.tensor([[0.1, 0.2, -0.1, -0.4]])
+    surf = torch.tensor([False, False, True, True])
+    m = ev.compute_metrics(pred, gt, surf)
+    # uniform set: pred occ [F, F], gt occ [T, F] -> 0/1 ; surface: pred [T, T], gt [T, F] -> 1/2
+    assert m["iou_unif"].item() == 0.0 and m["iou_surf"].item() == 0.5 and m["iou_mean"].item() == 0.25
+    assert m["mse_sdf"].item() == pytest.approx((0.04 + 0 + 0.04 + 0.64) / 4)
+    assert m["mse_abs_sdf"].item() == pytest.approx((0 + 0 + 0.04 + 0) / 4)
+    assert m["mse_sdf_surf"].item() == pytest.approx((0.04 + 0.64) / 2)
+    assert m["mse_abs_sdf_unif"].item() == pytest.approx(0.0)
+    with pytest.raises(ValueError, match="non-finite"):
+        ev.compute_metrics(torch.tensor([[float("nan"), 0, 0, 0]]), gt, surf)
+
+
+# ---------------------------------------------------------------------------------------------- evaluate
+def _gt_predictor(body):
+    return lambda out, pts: batch_mesh_sdf(out.vertices, body.faces, pts)
+
+
+def test_ground_truth_predictor_is_perfect(body, tmp_path):
+    res = ev.evaluate(_gt_predictor(body), body=body, cache_dir=str(tmp_path), **SMALL)
+    m = res.metrics
+    assert m["iou_surf"] == 1.0 and m["iou_unif"] == 1.0 and m["iou_mean"] == 1.0
+    assert m["mse_sdf"] == 0.0 and m["mse_abs_sdf"] == 0.0 and m["mse_sdf_surf"] == 0.0
+    assert res.validation_digest == ev.digest(ev.validation_bodies(2))
+    assert res.per_body["label"] == ev.validation_labels(2)
+    json.dumps(res.to_dict())  # JSON-able
+
+
+def test_shifted_and_flipped_predictors(body, tmp_path):
+    gt = _gt_predictor(body)
+    res = ev.evaluate(lambda o, p: gt(o, p) + 0.01, body=body, cache_dir=str(tmp_path), **SMALL)
+    shifted = res.metrics
+    assert shifted["mse_sdf"] == pytest.approx(1e-4, rel=1e-4)
+    assert shifted["mse_sdf_surf"] == pytest.approx(1e-4, rel=1e-4)
+    assert shifted["mse_abs_sdf"] <= shifted["mse_sdf"] + 1e-12
+    # IoU of a body thinned by 1 cm: |{d < -1 cm}| / |{d < 0}| per set, from an independent SDF evaluation
+    bodies = ev.validation_bodies(2)
+    verts = ev.pose_bodies(body, bodies)
+    pts, surf = ev.query_points(verts, body.faces, SMALL["n_points"])
+    d = batch_mesh_sdf(verts.double().numpy(), body.faces, pts.double().numpy())
+    for name, sel in (("iou_surf", surf.numpy()), ("iou_unif", ~surf.numpy())):
+        ref = (d[:, sel] < -0.01).sum(1) / (d[:, sel] < 0).sum(1)
+        assert res.per_body[name] == pytest.approx(ref.tolist(), abs=2e-3)
+    assert 0.1 < shifted["iou_surf"] < 0.6  # near-surface points (sigma 1 cm) are mostly within 1 cm of it
+    flipped = ev.evaluate(lambda o, p: -gt(o, p), body=body, cache_dir=str(tmp_path), **SMALL).metrics
+    assert flipped["iou_surf"] == 0.0 and flipped["iou_unif"] == 0.0
+    assert flipped["mse_abs_sdf"] == 0.0 and flipped["mse_sdf"] > 1e-4
+
+
+def test_random_model_scores_low(body, tiny_config, tmp_path):
+    torch.manual_seed(0)
+    vol = volsmpl.attach_volume(body, pretrained=False, config=tiny_config)
+    res = ev.evaluate_volume(vol, body, cache_dir=str(tmp_path), **SMALL)
+    assert res.metrics["iou_mean"] < 0.9
+    assert res.metrics["mse_sdf"] > 1e-5
+
+
+def test_ground_truth_cache(body, posed, tmp_path, monkeypatch):
+    _, verts = posed
+    pts, _ = ev.query_points(verts, body.faces, 1000)
+    first = ev.ground_truth(verts, body.faces, pts, cache_dir=tmp_path)
+    assert len(list(tmp_path.glob("gt_*.npz"))) == 1
+    import volsmpl.groundtruth as gtmod
+
+    def boom(*a, **k):
+        raise AssertionError("cache miss")
+    monkeypatch.setattr(gtmod, "batch_mesh_sdf", boom)
+    assert torch.equal(ev.ground_truth(verts, body.faces, pts, cache_dir=tmp_path), first)
+    with pytest.raises(AssertionError, match="cache miss"):  # other points: other key
+        ev.ground_truth(verts, body.faces, pts + 1e-3, cache_dir=tmp_path)
+    with pytest.raises(AssertionError, match="cache miss"):  # other sign mode: other key
+        ev.ground_truth(verts, body.faces, pts, sign="winding", cache_dir=tmp_path)
+
+
+def test_bad_predictor_shape_is_reported(body, tmp_path):
+    with pytest.raises(ValueError, match="one SDF value per point"):
+        ev.evaluate(lambda o, p: p[..., 0:1], body=body, cache_dir=str(tmp_path), **SMALL)
+
+
+def test_config_errors():
+    with pytest.raises(ValueError, match="n_points"):
+        ev.EvalConfig(n_points=0)
+    with pytest.raises(ValueError, match="surface_fraction"):
+        ev.EvalConfig(surface_fraction=1.5)
+
+
+# ---------------------------------------------------------------------------------------------- CLI
+def test_cli_end_to_end(body, tiny_config, tmp_path, capsys):
+    torch.manual_seed(1)
+    vol = volsmpl.attach_volume(body, pretrained=False, config=tiny_config)
+    path = tmp_path / "tiny"
+    save_checkpoint(path, vol.net.state_dict(), vol.net.config.to_dict(), {"body_fingerprint": vol.fingerprint})
+    loaded = volsmpl.attach_volume(volsmpl.create_body(), checkpoint=path)
+    assert all(torch.equal(loaded.net.state_dict()[k], v) for k, v in vol.net.state_dict().items())
+
+    from volsmpl.cli import main
+    out_json = tmp_path / "res.json"
+    rc = main(["eval", "--checkpoint", str(path), "--n-bodies", "2", "--points", "2000", "--out", str(out_json),
+               "--cache-dir", str(tmp_path / "cache"), "--timing", "--repeats", "2", "--threads", "1"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "COAP (paper)" in text and "VolumetricSMPL (paper)" in text and "IoU mean" in text
+    res = json.loads(out_json.read_text())
+    assert res["config"]["n_bodies"] == 2 and res["config"]["n_points"] == 2000
+    assert res["validation_digest"] == ev.digest(ev.validation_bodies(2))
+    assert 0.0 <= res["metrics"]["iou_mean"] < 0.9
+    # the same checkpoint evaluated in-process gives the same metrics
+    direct = ev.evaluate_volume(loaded, volsmpl.create_body(), n_bodies=2, n_points=2000, cache_dir=str(tmp_path / "cache"))
+    assert direct.metrics == pytest.approx(res["metrics"], rel=1e-6, abs=1e-12)
+    r = res["resources"]
+    assert r["points"] == 2000 and r["t_ms"] > 0 and r["t_query_ms"] > 0 and len(r["t_ms_all"]) == 2
+    assert r["mem_kind"] == "cpu peak RSS increase" and r["mem_bytes"] >= 0
+    assert main(["eval", "--checkpoint", str(tmp_path / "missing"), "--n-bodies", "1"]) == 2
