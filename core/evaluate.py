@@ -43,8 +43,9 @@ MSE means equal the means over all points):
 Resources (optional, `timing=True`): measured in a fresh subprocess on body 0 (batch 1) and all its
 points, under torch.no_grad(): median wall time over `timing_repeats` after `timing_warmup` runs,
 with encoding (partition + PointNet + NBW weights + query) and without (query on a given encoding);
-memory on CUDA = torch.cuda.max_memory_allocated during one encode+query; on CPU = increase of the
-process's peak RSS (ru_maxrss) over its RSS just before the first encode+query.
+memory on CUDA = torch.cuda.max_memory_allocated during one encode+query (minus what was allocated
+before); on CPU = peak RSS during the first encode+query minus the RSS just before it (ru_maxrss when
+the query sets the process's high-water mark, else RSS polled every 0.2 ms in a thread).
 """
 from __future__ import annotations
 
@@ -490,8 +491,9 @@ def measure_resources(spec: dict, config: Optional[EvalConfig] = None, **overrid
     Returns:
         dict: t_ms (median, encoding included), t_query_ms (median, encoding excluded), t_ms_all /
         t_query_ms_all (every timed run), mem_bytes, mem_kind ('cuda max_memory_allocated' or
-        'cpu peak RSS increase'), mem_upper_bound (CPU: the peak did not rise above the set-up peak, so
-        the value bounds the query's memory from above), device, threads.
+        'cpu peak RSS increase'), mem_method (CPU: 'ru_maxrss' when the query raised the process's
+        high-water mark, else the peak of the RSS polled every 0.2 ms during the query: model
+        construction can peak higher than a query), device, threads.
     """
     cfg = dataclasses.replace(config or EvalConfig(), **overrides)
     from .body.model import create_body
@@ -525,6 +527,39 @@ def _maxrss_bytes() -> int:
     import resource
     r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return int(r) if sys.platform == "darwin" else int(r) * 1024  # Linux reports KiB
+
+
+def _malloc_trim() -> None:
+    try:
+        import ctypes
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc: RSS may then include reusable freed memory
+        pass
+
+
+class _RssSampler:
+    """Context manager polling this process's RSS in a thread (torch ops release the GIL); .peak in bytes."""
+
+    def __init__(self, interval: float = 2e-4):
+        self.interval, self.peak = interval, _rss_bytes()
+
+    def __enter__(self):
+        import threading
+        self._stop = threading.Event()
+
+        def poll():
+            while not self._stop.is_set():
+                self.peak = max(self.peak, _rss_bytes())
+                self._stop.wait(self.interval)
+        self._thread = threading.Thread(target=poll, daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self.peak = max(self.peak, _rss_bytes())
+        return False
 
 
 def _resource_worker(job_json: str) -> None:
@@ -569,13 +604,21 @@ def _resource_worker(job_json: str) -> None:
             sync()
             res.update(mem_bytes=int(torch.cuda.max_memory_allocated(device) - base),
                        mem_total_bytes=int(torch.cuda.max_memory_allocated(device)),
-                       mem_kind="cuda max_memory_allocated", mem_upper_bound=False)
+                       mem_kind="cuda max_memory_allocated", mem_method="torch.cuda.max_memory_allocated")
         else:
+            _malloc_trim()  # return freed set-up memory to the OS, so the query's pages count in the RSS
             base, peak0 = _rss_bytes(), _maxrss_bytes()
-            full()
+            with _RssSampler() as sampler:
+                full()
             peak1 = _maxrss_bytes()
-            res.update(mem_bytes=int(peak1 - base), mem_total_bytes=int(peak1),
-                       mem_kind="cpu peak RSS increase", mem_upper_bound=bool(peak1 <= peak0))
+            # ru_maxrss is a high-water mark that Linux carries over fork+exec from the parent, so a parent with a
+            # large RSS hides the query's peak: then fall back to the polled RSS.
+            if peak1 > peak0:  # the query set a new high-water mark: exact
+                res.update(mem_bytes=int(peak1 - base), mem_total_bytes=int(peak1), mem_method="ru_maxrss")
+            else:  # the set-up's peak was higher: use the sampled RSS (may miss sub-millisecond spikes)
+                res.update(mem_bytes=int(sampler.peak - base), mem_total_bytes=int(sampler.peak),
+                           mem_method=f"RSS sampled every {sampler.interval * 1e3:g} ms")
+            res.update(mem_kind="cpu peak RSS increase")
         for _ in range(int(job["warmup"])):
             full()
         sync()
@@ -605,7 +648,7 @@ def _fmt_mem(r: dict) -> str:
     mib = r["mem_bytes"] / 2 ** 20
     where = "GPU" if r["mem_kind"].startswith("cuda") else "CPU"
     s = f"{mib / 1024:.2f} G {where}" if mib >= 1024 else f"{mib:.0f} M {where}"
-    return ("<=" + s) if r.get("mem_upper_bound") else s
+    return s
 
 
 def format_table(results) -> str:
