@@ -26,7 +26,12 @@ float32, laid out [uniform | near-surface]:
   - the rest near the surface: area-weighted uniform samples on the posed mesh + isotropic Gaussian
     offsets N(0, sigma^2 I), sigma = 1 cm (the paper's protocol follows COAP; COAP's evaluation
     perturbs surface samples at the centimetre scale, where the "surf." IoU is decided).
-Defaults give the paper's 60k = 30k uniform + 30k near-surface.
+Defaults give the paper's 60k = 30k uniform + 30k near-surface. COAP's released training code (whose
+protocol the paper follows) uses the same sigma (0.01) but draws its "uniform" half inside the padded part
+boxes rather than the body's box; the body box is the paper's wording ("uniformly sampled around the body")
+and does not depend on the model's partition, so models with different boxes see the same points.
+Shapes come from the same population bank as training shapes (`sample_betas`, 1024 bodies): what training
+never sees is the pose distribution (extreme / named), the orientations and the shape-group extremes.
 
 Ground truth: `volsmpl.groundtruth.batch_mesh_sdf` (exact distance, ray-parity sign by default), cached in
 `<cache_dir>/gt_<key>.npz` with key = sha256 of (vertices, faces, points, sign mode): any change of the
@@ -46,6 +51,11 @@ with encoding (partition + PointNet + NBW weights + query) and without (query on
 memory on CUDA = torch.cuda.max_memory_allocated during one encode+query (minus what was allocated
 before); on CPU = peak RSS during the first encode+query minus the RSS just before it (ru_maxrss when
 the query sets the process's high-water mark, else RSS polled every 0.2 ms in a thread).
+On a CPU shared with other busy processes, time with `--threads 1`: OpenMP threads waiting for each other
+made an encode+query 10x slower with 2 threads than with 1 on the 2-core development machine.
+
+Cost (2 shared CPU cores, 64 bodies x 60k points): ground truth ~22 s once (then read from the cache in
+~0.2 s), a randomly initialised default network ~27 s with 1 thread; timing adds ~10 s.
 """
 from __future__ import annotations
 
