@@ -4,11 +4,12 @@ Every step draws B bodies (realistic random poses within joint limits, shapes fr
 population), per part 256 points uniform in its padded box and 256 near the surface, exact signed
 distances to the posed mesh (open3d BVH distance + ray-voting sign), and minimises eq. 3:
 
-    L = mean (tanh(d~ / tau) - sgn(d))^2  +  abs_weight * mean (|d~| - |d|)^2
+    L = mean (sgn(d~) - sgn(d))^2  +  abs_weight * mean (|d~| - |d|)^2
 
-sgn is not differentiable, so the sign term uses tanh(d~/tau) (tau = 5 mm: saturated a few mm away from
-the surface, where it equals sgn). The absolute-value term is in metres^2; abs_weight = 1e4 measures it in
-cm^2 so that both terms are O(1) (the paper's plain sum leaves it ~1e-4 of the sign term).
+sgn has no useful derivative, so the sign term back-propagates a straight-through estimate
+(d sgn(x)/dx := 1/tau, tau = 1 cm): every wrong sign is pushed across the surface, however far it is.
+The absolute-value term is in metres^2; abs_weight = 1e4 measures it in cm^2 so that both terms are
+O(1) (the paper's plain sum leaves it ~1e-4 of the sign term).
 
 Data of step s on rank r depend only on (seed, s, r), so a resumed run continues exactly. Checkpoints
 (model + optimiser, safetensors; nothing pickled) are written to <out>/ckpt-<step>/ and published by
@@ -51,7 +52,7 @@ class TrainConfig:
     n_uniform: int = 256            # per part, uniform in its padded box (paper)
     n_surface: int = 256            # per part, near the surface (paper)
     surface_sigma: tuple = (0.01, 0.05)  # metres; see volsmpl.groundtruth
-    sign_tau: float = 0.005         # metres, tanh sign surrogate
+    sign_tau: float = 0.01          # metres: straight-through gradient scale of the sign term
     abs_weight: float = 1e4         # |SDF| term in cm^2
     pose_mode: str = "realistic"
     global_orient_scale: float = 0.0  # rad sd of random global orientation (parts are in local frames anyway)
@@ -91,8 +92,15 @@ def lr_at(cfg: TrainConfig, step: int) -> float:
 
 
 def sdf_loss(pred: torch.Tensor, gt: torch.Tensor, cfg: TrainConfig) -> tuple[torch.Tensor, dict]:
-    """Eq. 3 with a differentiable sign term. pred, gt (B, N) metres -> (loss, parts)."""
-    sign = (torch.tanh(pred / cfg.sign_tau) - torch.sign(gt)).square().mean()
+    """Eq. 3: l2(sgn(d~), sgn(d)) + abs_weight * l2(|d~|, |d|), means over points. pred, gt (B, N) metres.
+
+    The sign term's forward value is exactly the paper's; its gradient is a straight-through estimate,
+    d sgn(d~)/d d~ := 1/sign_tau, so a wrong sign is pushed across the surface at any distance (a tanh
+    surrogate saturates and leaves far wrong signs without gradient; the |d| term cannot flip a sign).
+    """
+    scaled = pred / cfg.sign_tau
+    sgn = torch.sign(pred).detach() + scaled - scaled.detach()
+    sign = (sgn - torch.sign(gt)).square().mean()
     absl = (pred.abs() - gt.abs()).square().mean() * cfg.abs_weight
     return sign + absl, {"sign": float(sign.detach()), "abs": float(absl.detach())}
 

@@ -1,0 +1,133 @@
+"""Training: loss definition, learning on a fixed batch, exact resume, micro-batching, DDP on gloo."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+import torch
+
+import volsmpl
+from volsmpl.nn.config import VolumeConfig
+from volsmpl.train import TrainConfig, TrainStep, _accumulate, lr_at, make_batch, sdf_loss, train
+
+TINY = VolumeConfig(latent_dim=16, encoder_hidden=16, encoder_blocks=2, n_surface_samples=64, decoder_hidden=16, nbw_rank=2)
+
+
+def tiny_cfg(**kw):
+    return TrainConfig(batch_size=2, n_uniform=16, n_surface=16, model=TINY, steps=1000, ckpt_every=2, log_every=1, **kw)
+
+
+def test_loss_terms():
+    cfg = TrainConfig()
+    gt = torch.tensor([[0.05, -0.04, 0.1]])
+    loss, parts = sdf_loss(gt.clone(), gt, cfg)  # perfect prediction
+    assert parts["abs"] == 0 and parts["sign"] == 0
+    wrong = -gt
+    _, p2 = sdf_loss(wrong, gt, cfg)
+    assert abs(p2["sign"] - 4.0) < 1e-3 and p2["abs"] == 0  # all signs wrong: (±1 ∓ 1)^2 = 4
+    _, p3 = sdf_loss(gt + 0.01, gt, cfg)
+    assert abs(p3["abs"] - cfg.abs_weight * 1e-4) < 1e-6
+    # the sign term's gradient reaches wrong signs however far they are (straight-through), none for right ones
+    pred = torch.tensor([[0.5, -0.04, 0.1]], requires_grad=True)  # first point: 50 cm on the wrong side
+    l, _ = sdf_loss(pred, torch.tensor([[-0.05, -0.04, 0.1]]), TrainConfig(abs_weight=0.0))
+    l.backward()
+    assert pred.grad[0, 0] > 0 and pred.grad[0, 1] == 0 and pred.grad[0, 2] == 0
+
+
+def test_lr_schedule_and_config_roundtrip():
+    cfg = TrainConfig(steps=100)
+    assert lr_at(cfg, 0) == pytest.approx(1e-4) and lr_at(cfg, 100) == pytest.approx(1e-5)
+    assert lr_at(cfg, 50) == pytest.approx(1e-4 * 0.1 ** 0.5)
+    d = json.loads(json.dumps(cfg.to_dict()))
+    assert TrainConfig.from_dict(d).to_dict() == cfg.to_dict()
+    with pytest.raises(ValueError, match="unknown training config"):
+        TrainConfig.from_dict({"batchsize": 3})
+
+
+def test_batch_deterministic_and_ground_truth(body):
+    cfg = tiny_cfg()
+    part = volsmpl.Partition(body)
+    a, b = make_batch(cfg, body, part, 5), make_batch(cfg, body, part, 5)
+    assert torch.equal(a["points"], b["points"]) and torch.equal(a["sdf"], b["sdf"])
+    assert not torch.equal(a["points"], make_batch(cfg, body, part, 6)["points"])
+    K = part.num_parts
+    assert a["points"].shape == (2, K * 32, 3)
+    # ground truth against the exact generalised winding number sign on a subset
+    from volsmpl.groundtruth import winding_number
+    out = body(**a["params"])
+    w = winding_number(out.vertices[0], body.faces, a["points"][0, ::8])
+    inside = torch.as_tensor(w) > 0.5
+    assert ((a["sdf"][0, ::8] < 0) == inside).float().mean() > 0.99
+
+
+def test_micro_batches_give_the_full_batch_gradient(body):
+    cfg = tiny_cfg()
+    torch.manual_seed(0)
+    vol = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=TINY)
+    vol.train()
+    step = TrainStep(vol._body if hasattr(vol, "_body") else volsmpl.create_body(), vol, cfg)
+    batch = make_batch(cfg, body, vol.partition, 0)
+    grads = []
+    for micro in (2, 1):
+        vol.net.zero_grad()
+        _accumulate(step, batch, micro, False)
+        grads.append([p.grad.clone() for p in vol.net.parameters()])
+    # micro=2 is one pass over both bodies with seed*7919; micro=1 uses other sample seeds per chunk,
+    # so compare micro=1 against an explicit two-pass reference with the same seeds instead
+    vol.net.zero_grad()
+    loss = 0
+    for i in range(2):
+        sub = {"params": {k: v[i:i + 1] for k, v in batch["params"].items()}, "points": batch["points"][i:i + 1],
+               "sdf": batch["sdf"][i:i + 1], "seed": batch["seed"] * 7919 + i}
+        l, _ = step(sub)
+        (l / 2).backward()
+    for g1, p in zip(grads[1], vol.net.parameters()):
+        assert torch.allclose(g1, p.grad, atol=1e-6)
+
+
+def test_learns_fixed_batch(body):
+    cfg = tiny_cfg()
+    torch.manual_seed(0)
+    vol = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=TINY)
+    vol.train()
+    step = TrainStep(body, vol, cfg)
+    batch = make_batch(cfg, body, vol.partition, 0)
+    opt = torch.optim.Adam(vol.net.parameters(), lr=3e-3)
+    losses = []
+    for _ in range(40):
+        opt.zero_grad()
+        loss, _ = _accumulate(step, batch, 2, False)
+        opt.step()
+        losses.append(loss)
+    assert losses[-1] < 0.5 * losses[0], losses[::8]
+
+
+def test_resume_continues_exactly(tmp_path):
+    cfg = tiny_cfg()
+    full = train(cfg, tmp_path / "a", max_steps=4, quiet=True)
+    train(cfg, tmp_path / "b", max_steps=2, quiet=True)
+    resumed = train(cfg, tmp_path / "b", resume=True, max_steps=2, quiet=True)
+    assert resumed["losses"] == pytest.approx(full["losses"][2:], rel=1e-5, abs=1e-7)
+    assert (tmp_path / "b" / "latest").read_text() == "ckpt-00000004"
+    with pytest.raises(FileExistsError, match="--resume"):
+        train(cfg, tmp_path / "b", max_steps=1, quiet=True)
+    # the checkpoint is a normal volsmpl checkpoint
+    vol = volsmpl.attach_volume(volsmpl.create_body(), checkpoint=tmp_path / "b" / "ckpt-00000004" / "model")
+    assert vol.meta["training"]["step"] == 4
+
+
+@pytest.mark.slow
+def test_ddp_two_processes_gloo(tmp_path):
+    cfgf = tmp_path / "cfg.json"
+    cfgf.write_text(json.dumps(tiny_cfg().to_dict()))
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2", "--master_port=29533", "-m", "volsmpl.cli",
+           "train", "--config", str(cfgf), "--out", str(tmp_path / "ddp"), "--max-steps", "2"]
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    r = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert (tmp_path / "ddp" / "latest").exists()
+    rows = (tmp_path / "ddp" / "log.csv").read_text().strip().splitlines()
+    assert len(rows) == 3  # header + 2 steps, written by rank 0 only
