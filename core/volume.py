@@ -56,7 +56,7 @@ class Volume(torch.nn.Module):
 
     Args:
         body: the body model it is attached to (volsmpl.Body or smplx SMPL/SMPL-H/SMPL-X).
-        net: the network (VolumetricSMPLNet).
+        net: the network (VolumetricSMPLNet, or CoapNet for the occupancy baseline).
         dense: evaluate every part decoder on every point (reference path) instead of only the
             (point, part) pairs inside part boxes (default, same values and gradients).
         chunk_elems: memory budget of one query chunk in (body, part, point) entries.
@@ -125,18 +125,39 @@ class Volume(torch.nn.Module):
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=self.net.encode(local), stamp=_stamp(out))
 
     # ------------------------------------------------------------------ evaluation core
+    @property
+    def is_sdf(self) -> bool:
+        """True for signed-distance models (VolumetricSMPL), False for occupancy models (COAP)."""
+        return self.net.output == "sdf"
+
+    @property
+    def level(self) -> float:
+        """The surface level: SDF 0, occupancy 0.5."""
+        return 0.0 if self.is_sdf else float(self.net.config.level_set)
+
+    def occupied(self, values: torch.Tensor) -> torch.Tensor:
+        """Inside test of query/query_parts values: sdf < 0, or occupancy > level."""
+        return values < 0 if self.is_sdf else values > self.level
+
     def _part_values(self, enc: Encoding, points: torch.Tensor, dense: bool):
-        """points (B, N, 3) -> part (B, K, N) (decoder inside the part box, box SDF outside), inside (B, K, N)."""
+        """points (B, N, 3) -> part (B, K, N), inside (B, K, N) bool (point in part k's padded box).
+
+        SDF models: part k's decoder inside its box, the exact box SDF outside. Occupancy models:
+        part k's occupancy inside its box, 0 outside (COAP's masking)."""
         x_local = Partition.canonicalize(points, enc.G)
         inside = inside_boxes(x_local, enc.box_min, enc.box_max)
-        box = box_sdf(x_local, enc.box_min[:, :, None], enc.box_max[:, :, None])
+        if self.is_sdf:
+            outside = box_sdf(x_local, enc.box_min[:, :, None], enc.box_max[:, :, None])
+        else:
+            outside = x_local.new_zeros(x_local.shape[:3])
         if dense:
             self.decoder_evaluations += x_local.shape[0] * x_local.shape[1] * x_local.shape[2]
-            return torch.where(inside, self.net.decode_dense(x_local, enc.code), box), inside
+            extra = {} if self.is_sdf else {"inside": inside}
+            return torch.where(inside, self.net.decode_dense(x_local, enc.code, **extra), outside), inside
         b, k, n = inside.nonzero(as_tuple=True)
         self.decoder_evaluations += b.numel()
         vals = self.net.decode_pairs(x_local[b, k, n], b, k, enc.code)
-        return box.index_put((b, k, n), vals), inside
+        return outside.index_put((b, k, n), vals), inside
 
     def _chunks(self, B: int, N: int):
         step = max(1024, self.chunk_elems // max(1, B * self.num_parts))
@@ -174,18 +195,22 @@ class Volume(torch.nn.Module):
         res = []
         for s, e in self._chunks(B, N):
             part, inside = self._part_values(enc, points[:, s:e], dense)
-            implicit = torch.where(inside, part, torch.full_like(part, float("inf"))).amin(dim=1)
-            res.append(torch.where(inside.any(dim=1), implicit, part.amin(dim=1)))
+            if self.is_sdf:
+                implicit = torch.where(inside, part, torch.full_like(part, float("inf"))).amin(dim=1)
+                res.append(torch.where(inside.any(dim=1), implicit, part.amin(dim=1)))
+            else:  # COAP: max over box-masked part occupancies
+                res.append(part.amax(dim=1))
         return torch.cat(res, dim=1) if res else points.new_zeros(B, 0)
 
     def collision_loss(self, out, points: torch.Tensor, reduction: str = "mean") -> torch.Tensor:
-        """Penetration of points into the bodies: ReLU(-sdf).
+        """Penetration of points into the bodies: ReLU(-sdf); for occupancy models COAP's ReLU(occ - 0.5).
 
         reduction: 'mean' (scalar over all bodies and points), 'sum' (per body, (B,)) or 'none' ((B, N)).
         """
         if reduction not in ("mean", "sum", "none"):
             raise ValueError(f"reduction must be 'mean', 'sum' or 'none', got {reduction!r}")
-        pen = torch.relu(-self.query(out, points))
+        q = self.query(out, points)
+        pen = torch.relu(-q) if self.is_sdf else torch.relu(q - self.level)
         if reduction == "none":
             return pen
         if reduction == "sum":
@@ -202,7 +227,8 @@ class Volume(torch.nn.Module):
         3. Keep samples inside at least two parts that may collide, by the part-wise SDF (< 0).
         4. loss = sum over kept samples and over the colliding parts containing them of sigmoid(-d_k(x)):
            the paper's sigma(f(x)) with f read as positive inside (our SDF is negative inside), so that
-           minimising it pushes the parts apart.
+           minimising it pushes the parts apart. Occupancy models (COAP): sum over kept samples of
+           (sum of the colliding parts' occupancies - 0.5), as COAP.
         Returns: loss (B,); with return_points also a list of B tensors (M_b, 3) of kept samples.
         """
         enc = self.encode(out)
@@ -225,13 +251,17 @@ class Volume(torch.nn.Module):
         for b, c in enumerate(cands):
             padded[b, : c.shape[0]] = c
         part, _ = self._part_values(enc, padded, self.dense)  # (B, K, M)
-        occ = (part < 0).to(part.dtype)
+        occ = self.occupied(part).to(part.dtype)
         partner = torch.einsum("kl,blm->bkm", mask.to(part.dtype), occ) > 0  # part k has a colliding partner occupied
         involved = (occ > 0) & partner
         for b in range(B):
             n = cands[b].shape[0]
             inv = involved[b, :, :n]
-            losses.append((torch.sigmoid(-part[b, :, :n]) * inv).sum())
+            if self.is_sdf:
+                losses.append((torch.sigmoid(-part[b, :, :n]) * inv).sum())
+            else:
+                keep = inv.any(dim=0)
+                losses.append(((part[b, :, :n] * inv).sum(dim=0) - self.level)[keep].sum())
             kept.append(cands[b][inv.any(dim=0)])
         loss = torch.stack(losses)
         return (loss, kept) if return_points else loss
@@ -249,12 +279,16 @@ class Volume(torch.nn.Module):
         axes = [torch.linspace(float(lo[i]), float(hi[i]), resolution, dtype=v.dtype, device=v.device) for i in range(3)]
         grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), dim=-1).reshape(-1, 3)
         sub = _select(out, body_index)
-        sdf = self.query(sub, grid[None])[0].reshape(resolution, resolution, resolution).cpu().numpy()
-        if not (sdf.min() < 0 < sdf.max()):
-            raise RuntimeError("the SDF has no zero crossing in the body's box: the model is untrained or broken.")
+        field = self.query(sub, grid[None])[0].reshape(resolution, resolution, resolution).cpu().numpy()
+        if self.is_sdf:
+            field = -field  # positive inside, like occupancy
+        level = -self.level if self.is_sdf else self.level
+        if not (field.min() < level < field.max()):
+            raise RuntimeError("the field has no level-set crossing in the body's box: the model is untrained or broken.")
         spacing = ((hi - lo) / (resolution - 1)).cpu().numpy()
-        verts, faces, _, _ = marching_cubes(sdf, level=0.0, spacing=tuple(spacing))
-        return trimesh.Trimesh(verts + lo.cpu().numpy(), faces, process=False)  # skimage winds them outward for an SDF
+        verts, faces, _, _ = marching_cubes(field, level=level, spacing=tuple(spacing))
+        # skimage winds triangles outward when the field grows inward only after a flip
+        return trimesh.Trimesh(verts + lo.cpu().numpy(), faces[:, ::-1], process=False)
 
 
 def _select(out, b: int):
@@ -267,23 +301,44 @@ def _select(out, b: int):
     return one
 
 
+MODELS = ("volsmpl", "coap")
+
+
+def build_network(model: str, num_parts: int, config=None):
+    """The network of a model name with its config (paper defaults when config is None)."""
+    if model == "volsmpl":
+        return VolumetricSMPLNet(num_parts, config or VolumeConfig())
+    if model == "coap":
+        from .nn.coap_net import CoapConfig, CoapNet
+        return CoapNet(num_parts, config or CoapConfig())
+    raise ValueError(f"unknown model {model!r}; available: {', '.join(MODELS)}.")
+
+
+def config_from_dict(d: dict):
+    """Rebuild a model config saved in a checkpoint; returns (model name, config)."""
+    if d.get("model") == "coap":
+        from .nn.coap_net import CoapConfig
+        return "coap", CoapConfig.from_dict(d)
+    return "volsmpl", VolumeConfig.from_dict({k: v for k, v in d.items() if k != "model"})
+
+
 def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool = True, model: str = "volsmpl",
-                  config: VolumeConfig | None = None, dense: bool = False):
+                  config=None, dense: bool = False):
     """Attach a volumetric model as `body.volume` (and return it).
 
     Args:
         body: volsmpl.Body or smplx SMPL / SMPL-H / SMPL-X model.
         checkpoint: trained weights (path with or without .safetensors); default: the shipped checkpoint
-            for the default body.
+            of `model` for the default body.
         pretrained: False gives randomly initialised weights (tests, or the start of training).
-        model: 'volsmpl' (only model so far).
-        config: architecture for pretrained=False (checkpoints carry their own).
-        dense: use the dense reference query path.
+        model: 'volsmpl' (signed distance, this paper) or 'coap' (occupancy baseline, COAP).
+        config: architecture for pretrained=False (VolumeConfig / CoapConfig; checkpoints carry their own).
+        dense: use the dense reference query path (every part decoder on every point).
     """
-    if model != "volsmpl":
-        raise ValueError(f"unknown model {model!r}; available: 'volsmpl'.")
+    if model not in MODELS:
+        raise ValueError(f"unknown model {model!r}; available: {', '.join(MODELS)}.")
     fp = fingerprint_of_model(body)
-    meta = {}
+    meta, state = {}, None
     if pretrained:
         path = Path(checkpoint) if checkpoint is not None else DEFAULT_CHECKPOINTS[model]
         if checkpoint is None and not Path(str(path) + ".safetensors").exists():
@@ -291,12 +346,18 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
                 f"no trained {model} checkpoint ships for this body (fingerprint {fp}). Train one with "
                 f"`volsmpl train` and pass checkpoint=PATH, or use attach_volume(body, pretrained=False) for random weights.")
         state, cfg_dict, meta = load_checkpoint(path, expected_fingerprint=fp)
-        config = VolumeConfig.from_dict(cfg_dict)
-    config = config or VolumeConfig()
-    partition = Partition(body, n_samples=config.n_surface_samples, box_padding=config.box_padding)
-    net = VolumetricSMPLNet(partition.num_parts, config)
-    if pretrained:
-        net.load_state_dict(state)
+        kind, config = config_from_dict(cfg_dict)
+        if kind != model:
+            raise ValueError(f"{path} holds a {kind} model; call attach_volume(body, checkpoint=..., model='{kind}').")
+    partition = Partition(body, n_samples=(config.n_surface_samples if config else 1000),
+                          box_padding=(config.box_padding if config else 0.125))
+    net = build_network(model, partition.num_parts, config)
+    if state is not None:
+        try:
+            net.load_state_dict(state)
+        except RuntimeError as e:
+            raise ValueError(f"checkpoint {checkpoint} does not fit the {model} network for this body "
+                             f"({partition.num_parts} parts): {str(e)[:300]}") from e
     dev = body.v_template.device
     volume = Volume(body, net, partition, fp, dense=dense).to(dev)
     volume.meta = meta
