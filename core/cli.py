@@ -8,6 +8,7 @@ import sys
 
 # subcommand name -> module providing add_parser(subparsers) and run(args)
 SUBCOMMANDS = {
+    "bench": "volsmpl.bench",
     "body": "volsmpl.body.cli",
     "demo": "volsmpl.demo",
     "eval": "volsmpl.evaluate",

@@ -1,0 +1,115 @@
+"""Tests of `volsmpl bench`: an end-to-end run on a tiny setting, ratios, config errors. Timings are never asserted."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from volsmpl.bench import BenchConfig, PAPER, _estimate_call_s, _fit_budget, compute_ratios
+from volsmpl.cli import main
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """One CLI run: 2k points, batch 1, 1 repeat, volsmpl + volsmpl-dense, 200 body-body vertices."""
+    tmp = tmp_path_factory.mktemp("bench")
+    out, md = tmp / "bench.json", tmp / "bench.md"
+    rc = main(["bench", "--points", "2000", "--batch", "1", "--repeats", "1", "--warmup", "1", "--threads", "1",
+               "--models", "volsmpl,volsmpl-dense", "--bodybody-vertices", "200", "--winding-repeats", "1",
+               "--matmul-size", "256", "--quick", "--out", str(out), "--markdown", str(md)])
+    assert rc == 0
+    return json.loads(out.read_text()), md.read_text()
+
+
+def test_json_has_expected_keys(tiny_run):
+    res, _ = tiny_run
+    for key in ("meta", "config", "matmul", "models", "bodybody", "ratios", "accuracy", "paper", "notes",
+                "evaluate_protocol"):
+        assert key in res, key
+    assert res["meta"]["threads"] == 1 and res["meta"]["torch"]
+    assert res["matmul"]["size"] == 256 and res["matmul"]["gflops"] > 0
+    assert set(res["models"]) == {"volsmpl", "volsmpl-dense"}
+    for name, dense in (("volsmpl", False), ("volsmpl-dense", True)):
+        e = res["models"][name]
+        assert e["status"] == "ok" and e["dense"] is dense and set(e["batches"]) == {"1"}
+        r = e["batches"]["1"]
+        for key in ("t_ms", "t_query_ms", "mem_bytes", "mem_query_bytes", "mem_first_call_bytes", "params",
+                    "decoder_pairs", "flops_per_pair", "evals_per_point", "decoder_gflop", "gflops"):
+            assert r[key] is not None, (name, key)
+        assert r["batch"] == 1 and r["points"] == 2000 and len(r["t_ms_all"]) == 1
+        assert r["weights"] == "random init"
+    assert res["accuracy"]["volsmpl"]["status"].startswith("skipped")
+
+
+def test_decoder_work_is_consistent(tiny_run):
+    res, _ = tiny_run
+    sparse, dense = (res["models"][m]["batches"]["1"] for m in ("volsmpl", "volsmpl-dense"))
+    K = sparse["num_parts"]
+    assert dense["evals_per_point"] == pytest.approx(K)  # dense: every part on every point
+    assert 0 < sparse["evals_per_point"] < K  # sparse: only the boxes containing the point
+    assert sparse["params"] == dense["params"] and sparse["flops_per_pair"] == dense["flops_per_pair"]
+    assert sparse["decoder_gflop"] == pytest.approx(sparse["decoder_pairs"] * sparse["flops_per_pair"] / 1e9)
+
+
+def test_ratios_and_bodybody(tiny_run):
+    res, _ = tiny_run
+    r = res["ratios"]["volsmpl-dense/volsmpl"]["1"]
+    a, b = res["models"]["volsmpl-dense"]["batches"]["1"], res["models"]["volsmpl"]["batches"]["1"]
+    assert r["time"] == pytest.approx(a["t_ms"] / b["t_ms"])
+    assert r["time_query"] == pytest.approx(a["t_query_ms"] / b["t_query_ms"])
+    assert "coap/volsmpl" not in res["ratios"]  # coap was not requested
+    bb = res["bodybody"]
+    assert bb["vertices_tested"] == 200 and 0.0 <= bb["agreement"] <= 1.0
+    w = res["ratios"]["winding/volsmpl"]["bodybody"]
+    assert w["time"] == pytest.approx(bb["winding"]["t_ms"] / bb["volsmpl"]["t_ms"])
+    assert bb["winding"]["points"] == 200 and bb["winding"]["faces"] == bb["faces"]
+
+
+def test_markdown_written(tiny_run):
+    _, md = tiny_run
+    assert md.startswith("# Benchmark")
+    for text in ("| volsmpl | 1 |", "| volsmpl-dense | 1 |", "volsmpl-dense/volsmpl", "winding numbers", "torch",
+                 "Table B.4"):
+        assert text in md, text
+
+
+def test_compute_ratios_pairs_and_paper():
+    row = lambda t, q, m: {"t_ms": t, "t_query_ms": q, "mem_bytes": m, "mem_query_bytes": m / 2}
+    models = {"volsmpl": {"batches": {"1": row(10, 2, 100), "8": row(40, 8, 400)}},
+              "coap": {"batches": {"1": row(90, 40, 600)}}}
+    bb = {"winding": {"t_ms": 400, "mem_bytes": 1000}, "volsmpl": {"t_ms": 10, "t_query_ms": 1, "mem_bytes": 20,
+                                                                    "mem_query_bytes": 10}}
+    r = compute_ratios(models, bb)
+    assert set(r["coap/volsmpl"]) == {"1"}  # only batch sizes both have
+    assert r["coap/volsmpl"]["1"] == {"time": 9.0, "time_query": 20.0, "mem": 6.0, "mem_query": 6.0}
+    assert r["winding/volsmpl"]["bodybody"] == {"time": 40.0, "time_query": 400.0, "mem": 50.0, "mem_query": 100.0}
+    assert PAPER["ratios"]["coap/volsmpl"]["time"] == pytest.approx(9.33, abs=0.01)
+    assert PAPER["ratios"]["winding/volsmpl"]["mem"] == pytest.approx(57.7, abs=0.1)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(models=("volsmpl", "leap")), "unknown model"),
+    (dict(batches=(0,)), "batch size"),
+    (dict(repeats=0), "repeats"),
+    (dict(device="tpu"), "device"),
+    (dict(checkpoints={"leap": "x"}), "checkpoints"),
+])
+def test_config_errors(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        BenchConfig(**kwargs)
+
+
+def test_missing_checkpoint_is_a_clear_cli_error(tmp_path, capsys):
+    rc = main(["bench", "--models", "volsmpl", "--checkpoint-volsmpl", str(tmp_path / "nope"), "--quick",
+               "--points", "1000", "--batch", "1", "--repeats", "1", "--matmul-size", "64", "--no-bodybody"])
+    assert rc == 2
+    assert "not found" in capsys.readouterr().err
+
+
+def test_budget_rules():
+    assert _fit_budget(2, 5, 0.1, 120.0) == (2, 5)  # fits: unchanged
+    assert _fit_budget(2, 5, 10.0, 120.0) == (0, 5)  # slow: no warm-up, 2 x 5 x 10 s <= 120 s
+    assert _fit_budget(2, 5, 30.0, 120.0) == (0, 2)
+    assert _fit_budget(2, 5, 500.0, 120.0) == (0, 1)  # always at least one timed run
+    assert _estimate_call_s({}, 8) is None
+    assert _estimate_call_s({"1": {"t_ms": 2000.0}}, 8) == pytest.approx(16.0)
