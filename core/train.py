@@ -64,7 +64,15 @@ class TrainConfig:
     log_every: int = 10
     keep_ckpts: int = 2
     num_threads: int = 0            # torch CPU threads (0: leave torch's default)
-    model: VolumeConfig = field(default_factory=VolumeConfig)
+    model_kind: str = "volsmpl"     # 'volsmpl' (SDF, eq. 3) or 'coap' (occupancy baseline, binary cross-entropy)
+    model: object = field(default_factory=VolumeConfig)  # VolumeConfig, or CoapConfig for model_kind 'coap'
+
+    def __post_init__(self):
+        if self.model_kind == "coap" and isinstance(self.model, VolumeConfig):
+            if self.model != VolumeConfig():
+                raise ValueError("model_kind='coap' needs a CoapConfig as model, got a VolumeConfig.")
+            from .nn.coap_net import CoapConfig
+            self.model = CoapConfig()
 
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
@@ -79,7 +87,13 @@ class TrainConfig:
         unknown = sorted(set(d) - known)
         if unknown:
             raise ValueError(f"unknown training config key(s) {unknown}; valid keys: {sorted(known)}")
-        if "model" in d:
+        kind = d.get("model_kind", "volsmpl")
+        if kind not in ("volsmpl", "coap"):
+            raise ValueError(f"model_kind must be 'volsmpl' or 'coap', got {kind!r}")
+        if kind == "coap":
+            from .nn.coap_net import CoapConfig
+            d["model"] = CoapConfig.from_dict(d.get("model", {}))
+        elif "model" in d:
             d["model"] = VolumeConfig.from_dict(d["model"])
         if "surface_sigma" in d:
             d["surface_sigma"] = tuple(d["surface_sigma"])
@@ -103,6 +117,13 @@ def sdf_loss(pred: torch.Tensor, gt: torch.Tensor, cfg: TrainConfig) -> tuple[to
     sign = (sgn - torch.sign(gt)).square().mean()
     absl = (pred.abs() - gt.abs()).square().mean() * cfg.abs_weight
     return sign + absl, {"sign": float(sign.detach()), "abs": float(absl.detach())}
+
+
+def occupancy_loss(pred: torch.Tensor, gt: torch.Tensor) -> tuple[torch.Tensor, dict]:
+    """COAP's objective: binary cross-entropy of the max-aggregated occupancy (B, N) against gt < 0."""
+    target = (gt < 0).to(pred.dtype)
+    bce = torch.nn.functional.binary_cross_entropy(pred.clamp(1e-6, 1 - 1e-6), target)
+    return bce, {"sign": float(bce.detach()), "abs": 0.0}
 
 
 def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> dict:
@@ -140,7 +161,9 @@ class TrainStep(torch.nn.Module):
         g = torch.Generator().manual_seed(batch["seed"])
         enc = self._volume.encode(out, generator=g)  # fresh surface samples: augmentation
         pred = self._volume.query_encoded(enc, batch["points"])
-        return sdf_loss(pred, batch["sdf"], self.cfg)
+        if self._volume.is_sdf:
+            return sdf_loss(pred, batch["sdf"], self.cfg)
+        return occupancy_loss(pred, batch["sdf"])
 
 
 def _accumulate(model, batch: dict, micro: int, ddp: bool) -> tuple[float, dict]:
@@ -243,7 +266,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         torch.set_num_threads(cfg.num_threads)
     torch.manual_seed(cfg.seed)
     body = create_body()
-    volume = attach_volume(body, pretrained=False, config=cfg.model)
+    volume = attach_volume(body, pretrained=False, model=cfg.model_kind, config=cfg.model)
     start = 0
     ck = latest_checkpoint(out_dir) if resume else None
     if resume and ck is None and not quiet and rank == 0:
