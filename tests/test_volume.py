@@ -234,3 +234,23 @@ def test_extract_mesh_recovers_level_set(vbody, monkeypatch):
     assert (r - 0.15).abs().max() < cell
     assert mesh.is_watertight and mesh.volume > 0  # outward-facing triangles
     assert abs(mesh.volume - 4 / 3 * 3.14159 * 0.15 ** 3) < 0.06 * 4 / 3 * 3.14159 * 0.15 ** 3
+
+
+def test_checkpoint_roundtrip_and_wrong_body(tmp_path, tiny_config):
+    """A checkpoint reloads to the same field; on another body (SMPL-X export) it fails naming the fingerprints."""
+    from volsmpl.checkpoint import CheckpointError, save_checkpoint
+    b = volsmpl.create_body()
+    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config)
+    save_checkpoint(tmp_path / "m", vol.net.state_dict(), tiny_config.to_dict(), {"body_fingerprint": vol.fingerprint})
+    b2 = volsmpl.create_body()
+    vol2 = volsmpl.attach_volume(b2, checkpoint=tmp_path / "m")
+    out = b(**random_pose(1, seed=11))
+    pts = _near_points(out, 200)
+    assert torch.equal(vol.query(out, pts), vol2.query(b2(**random_pose(1, seed=11)), pts))
+    smplx = pytest.importorskip("smplx")
+    from volsmpl.body.model import DEFAULT_SMPLX_FILE
+    m = smplx.SMPLX(model_path=str(DEFAULT_SMPLX_FILE), use_pca=False, num_betas=10)
+    with pytest.raises(CheckpointError, match=vol.fingerprint):
+        volsmpl.attach_volume(m, checkpoint=tmp_path / "m")
+    with pytest.raises(ValueError, match="holds a volsmpl model"):
+        volsmpl.attach_volume(volsmpl.create_body(), checkpoint=tmp_path / "m", model="coap")
