@@ -53,3 +53,13 @@ def test_input_errors():
         net(torch.zeros(10, 3))
     with pytest.raises(ValueError, match="empty"):
         net(torch.zeros(2, 0, 3))
+
+
+def test_cloud_chunking_does_not_change_codes():
+    torch.manual_seed(0)
+    enc = ResnetPointNet(latent_dim=8, hidden=8, n_blocks=2)
+    x = torch.randn(13, 20, 3)
+    enc.cloud_chunk = 100
+    whole = enc(x)
+    enc.cloud_chunk = 4
+    assert torch.allclose(enc(x), whole, atol=1e-6)
