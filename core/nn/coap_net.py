@@ -47,14 +47,15 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .nbw import count_parameters
+from .config import JsonConfig
+from .nbw import check_pairs, count_parameters
 from .pointnet import ResnetPointNet
 
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)
 
 
 @dataclass
-class CoapConfig:
+class CoapConfig(JsonConfig):
     """Hyperparameters of the COAP network (defaults: COAP's released model).
 
     Attributes:
@@ -122,26 +123,6 @@ class CoapConfig:
         self.geometric_init = bool(self.geometric_init)
         self.geometric_radius = float(self.geometric_radius)
 
-    def to_dict(self) -> Dict[str, Any]:
-        """JSON-safe dict (tuples become lists)."""
-        d = dataclasses.asdict(self)
-        for name in ("query_dims", "query_skip", "decoder_dims", "decoder_skip"):
-            d[name] = list(getattr(self, name))
-        return d
-
-    @classmethod
-    def from_dict(cls, d: Dict[str, Any]) -> "CoapConfig":
-        """Inverse of :meth:`to_dict`. Missing keys take the defaults; unknown keys are an error."""
-        if not isinstance(d, dict):
-            raise TypeError(f"CoapConfig.from_dict expects a dict, got {type(d).__name__}")
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(
-                f"unknown CoapConfig key(s) {unknown}; valid keys are {sorted(known)}. "
-                "The config was probably written by a different volsmpl version (or is a VolumeConfig): "
-                "remove these keys or upgrade volsmpl.")
-        return cls(**d)
 
 
 class CoapCode(NamedTuple):
@@ -403,22 +384,9 @@ class CoapNet(nn.Module):
             (M,) occupancy probabilities in [0, 1].
         """
         B, K = self._check_code(code)
-        if x_local.dim() != 2 or x_local.shape[1] != 3:
-            raise ValueError(f"decode_pairs expects x_local of shape (M, 3), got {tuple(x_local.shape)}")
-        M = x_local.shape[0]
-        if body_idx.shape != (M,) or part_idx.shape != (M,):
-            raise ValueError(f"decode_pairs expects body_idx and part_idx of shape (M={M},), "
-                             f"got {tuple(body_idx.shape)} and {tuple(part_idx.shape)}")
-        if body_idx.dtype not in (torch.int64, torch.int32) or part_idx.dtype not in (torch.int64, torch.int32):
-            raise TypeError("decode_pairs: body_idx and part_idx must be integer (int64) tensors")
-        if M == 0:
+        group = check_pairs(x_local, body_idx, part_idx, B, K)
+        if x_local.shape[0] == 0:
             return x_local.sum(-1) + code.z.sum() * 0               # (0,), keeps the graph
-        bmin, bmax = int(body_idx.min()), int(body_idx.max())
-        pmin, pmax = int(part_idx.min()), int(part_idx.max())
-        if bmin < 0 or bmax >= B or pmin < 0 or pmax >= K:
-            raise IndexError(f"decode_pairs: body_idx in [{bmin}, {bmax}] and part_idx in [{pmin}, {pmax}] "
-                             f"must lie in [0, {B}) and [0, {K}) (the code's batch)")
-        group = body_idx.long() * K + part_idx.long()
         return self._run(x_local, group, self._tables(code, False), None)
 
     # ------------------------------------------------------------------ costs

@@ -10,8 +10,31 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, Tuple
 
 
+class JsonConfig:
+    """to_dict/from_dict for config dataclasses stored in checkpoints: tuples become lists, missing keys
+    take the defaults, unknown keys are an error naming the valid ones."""
+
+    def to_dict(self) -> Dict[str, Any]:
+        """JSON-safe dict (tuples become lists)."""
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: Dict[str, Any]):
+        """Inverse of :meth:`to_dict`."""
+        if not isinstance(d, dict):
+            raise TypeError(f"{cls.__name__}.from_dict expects a dict, got {type(d).__name__}")
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(
+                f"unknown {cls.__name__} key(s) {unknown}; valid keys are {sorted(known)}. "
+                "The config was probably written by a different volsmpl version or for another model: "
+                "remove these keys or upgrade volsmpl.")
+        return cls(**d)
+
+
 @dataclass
-class VolumeConfig:
+class VolumeConfig(JsonConfig):
     """Architecture of encoder + Neural Blend Weights (NBW) + SDF decoder.
 
     Attributes:
@@ -64,23 +87,3 @@ class VolumeConfig:
         if not float(self.box_padding) >= 0.0:
             raise ValueError(f"VolumeConfig.box_padding must be >= 0, got {self.box_padding!r}")
         self.box_padding = float(self.box_padding)
-
-    def to_dict(self) -> Dict[str, Any]:
-        """JSON-safe dict (tuples become lists)."""
-        d = dataclasses.asdict(self)
-        d["skip_layers"] = list(self.skip_layers)
-        return d
-
-    @classmethod
-    def from_dict(cls, d: Dict[str, Any]) -> "VolumeConfig":
-        """Inverse of :meth:`to_dict`. Missing keys take the defaults; unknown keys are an error."""
-        if not isinstance(d, dict):
-            raise TypeError(f"VolumeConfig.from_dict expects a dict, got {type(d).__name__}")
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(
-                f"unknown VolumeConfig key(s) {unknown}; valid keys are {sorted(known)}. "
-                "The config was probably written by a different volsmpl version: remove these keys "
-                "or upgrade volsmpl.")
-        return cls(**d)

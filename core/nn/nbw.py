@@ -110,6 +110,28 @@ def default_chunk(n_pairs: int, n_nonempty: int) -> int:
     return int(min(512, max(16, 1 << (half.bit_length() - 1))))
 
 
+def check_pairs(x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor, B: int, K: int) -> torch.Tensor:
+    """Validate (point, body, part) pairs for a decoder batch of B bodies x K parts.
+
+    Args: x_local (M, 3); body_idx, part_idx (M,) integers. Returns the group ids body * K + part (M,) int64.
+    """
+    if x_local.dim() != 2 or x_local.shape[1] != 3:
+        raise ValueError(f"decode_pairs expects x_local of shape (M, 3), got {tuple(x_local.shape)}")
+    M = x_local.shape[0]
+    if body_idx.shape != (M,) or part_idx.shape != (M,):
+        raise ValueError(f"decode_pairs expects body_idx and part_idx of shape (M={M},), "
+                         f"got {tuple(body_idx.shape)} and {tuple(part_idx.shape)}")
+    if body_idx.dtype not in (torch.int64, torch.int32) or part_idx.dtype not in (torch.int64, torch.int32):
+        raise TypeError("decode_pairs: body_idx and part_idx must be integer (int64) tensors")
+    if M:
+        bmin, bmax = int(body_idx.min()), int(body_idx.max())
+        pmin, pmax = int(part_idx.min()), int(part_idx.max())
+        if bmin < 0 or bmax >= B or pmin < 0 or pmax >= K:
+            raise IndexError(f"decode_pairs: body_idx in [{bmin}, {bmax}] and part_idx in [{pmin}, {pmax}] "
+                             f"must lie in [0, {B}) and [0, {K}) (the encoded batch)")
+    return body_idx.long() * K + part_idx.long()
+
+
 class NBWDecoder(nn.Module):
     """NBW generator + K-part SDF decoder.
 
@@ -296,23 +318,11 @@ class NBWDecoder(nn.Module):
             (M,) signed distances (out_dim == 1) or (M, out_dim).
         """
         B, K = self._check_gen(gen)
+        group = check_pairs(x_local, body_idx, part_idx, B, K)
         M = x_local.shape[0]
-        if x_local.dim() != 2 or x_local.shape[1] != 3:
-            raise ValueError(f"decode_pairs expects x_local of shape (M, 3), got {tuple(x_local.shape)}")
-        if body_idx.shape != (M,) or part_idx.shape != (M,):
-            raise ValueError(f"decode_pairs expects body_idx and part_idx of shape (M={M},), "
-                             f"got {tuple(body_idx.shape)} and {tuple(part_idx.shape)}")
-        if body_idx.dtype not in (torch.int64, torch.int32) or part_idx.dtype not in (torch.int64, torch.int32):
-            raise TypeError("decode_pairs: body_idx and part_idx must be integer (int64) tensors")
         if M == 0:
             out = x_local.sum(-1)
             return out if self.out_dim == 1 else out.unsqueeze(-1).expand(0, self.out_dim)
-        group = body_idx.long() * K + part_idx.long()
-        bmin, bmax = int(body_idx.min()), int(body_idx.max())
-        pmin, pmax = int(part_idx.min()), int(part_idx.max())
-        if bmin < 0 or bmax >= B or pmin < 0 or pmax >= K:
-            raise IndexError(f"decode_pairs: body_idx in [{bmin}, {bmax}] and part_idx in [{pmin}, {pmax}] "
-                             f"must lie in [0, {B}) and [0, {K}) (the generated weights' batch)")
         G = B * K
         if chunk is None:
             n_nonempty = int(torch.unique(group).numel()) if G > 1 else 1
