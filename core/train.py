@@ -255,8 +255,12 @@ def _dist_info():
 
 
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps: int | None = None,
-          device: str = "cpu", quiet: bool = False) -> dict:
+          device: str = "cpu", quiet: bool = False, init: str | Path | None = None) -> dict:
     """Run (or resume) training. max_steps stops early (this process) without changing the schedule.
+
+    resume continues the run in out_dir exactly (weights, Adam state, step). init starts a new run from
+    a model checkpoint (e.g. one committed by an earlier session): its weights and its training step,
+    so the learning-rate schedule and the data stream continue; Adam's moments start afresh.
 
     Returns a summary dict: last step, last loss, steps/s.
     """
@@ -274,6 +278,13 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     if not resume and (out_dir / "latest").exists():
         raise FileExistsError(f"{out_dir} already holds a run; pass --resume to continue it or choose another --out.")
     opt = torch.optim.Adam(volume.net.parameters(), lr=lr_at(cfg, 0))
+    if init is not None and ck is None:
+        state, cfg_dict, meta = load_checkpoint(init, expected_fingerprint=volume.fingerprint)
+        if cfg_dict != cfg.model.to_dict():
+            raise ValueError(f"{init} holds model config {cfg_dict}, not {cfg.model.to_dict()}; pass its training "
+                             f"config (saved in its JSON under meta.training.train_config) with --config.")
+        volume.net.load_state_dict(state)
+        start = int(meta.get("training", {}).get("step", 0))
     if ck is not None:
         from safetensors.torch import load_file
         state, _, meta = load_checkpoint(ck / "model", expected_fingerprint=volume.fingerprint)
@@ -342,6 +353,7 @@ def add_parser(sub):
     p.add_argument("--out", default="runs/volsmpl", help="run folder: checkpoints, log.csv, config.json")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its latest checkpoint")
     p.add_argument("--max-steps", type=int, default=None, help="stop this process after so many steps")
+    p.add_argument("--init", default=None, help="start from this model checkpoint's weights and step (new optimiser)")
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="override config fields, e.g. batch_size=4")
     return p
@@ -357,6 +369,9 @@ def run(args) -> int:
         k, _, v = kv.partition("=")
         d[k] = json.loads(v) if v[:1] in "0123456789-[{tf" else v
     cfg = TrainConfig.from_dict(d)
-    summary = train(cfg, args.out, resume=args.resume, max_steps=args.max_steps, device=args.device)
+    if args.init and not args.config and not args.set:
+        meta = json.loads(Path(str(args.init).removesuffix(".safetensors") + ".json").read_text())["meta"]
+        cfg = TrainConfig.from_dict(meta["training"]["train_config"])
+    summary = train(cfg, args.out, resume=args.resume, max_steps=args.max_steps, device=args.device, init=args.init)
     print(f"done: step {summary.get('step')} loss {summary.get('loss')}")
     return 0

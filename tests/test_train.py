@@ -17,7 +17,8 @@ TINY = VolumeConfig(latent_dim=16, encoder_hidden=16, encoder_blocks=2, n_surfac
 
 
 def tiny_cfg(**kw):
-    return TrainConfig(batch_size=2, n_uniform=16, n_surface=16, model=TINY, steps=1000, ckpt_every=2, log_every=1, **kw)
+    kw = {"model": TINY, **kw}
+    return TrainConfig(batch_size=2, n_uniform=16, n_surface=16, steps=1000, ckpt_every=2, log_every=1, **kw)
 
 
 def test_loss_terms():
@@ -131,3 +132,13 @@ def test_ddp_two_processes_gloo(tmp_path):
     assert (tmp_path / "ddp" / "latest").exists()
     rows = (tmp_path / "ddp" / "log.csv").read_text().strip().splitlines()
     assert len(rows) == 3  # header + 2 steps, written by rank 0 only
+
+
+def test_init_from_model_checkpoint(tmp_path):
+    """A new run started from a committed model checkpoint continues its weights and step."""
+    cfg = tiny_cfg()
+    train(cfg, tmp_path / "a", max_steps=2, quiet=True)
+    r = train(cfg, tmp_path / "c", init=tmp_path / "a" / "ckpt-00000002" / "model", max_steps=1, quiet=True)
+    assert r["step"] == 3
+    with pytest.raises(ValueError, match="holds model config"):
+        train(tiny_cfg(model=VolumeConfig()), tmp_path / "d", init=tmp_path / "a" / "ckpt-00000002" / "model", quiet=True)
