@@ -278,7 +278,7 @@ class Volume(torch.nn.Module):
         lo, hi = v.amin(0) - padding, v.amax(0) + padding
         axes = [torch.linspace(float(lo[i]), float(hi[i]), resolution, dtype=v.dtype, device=v.device) for i in range(3)]
         grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), dim=-1).reshape(-1, 3)
-        sub = _select(out, body_index)
+        sub = select_body(out, body_index)
         field = self.query(sub, grid[None])[0].reshape(resolution, resolution, resolution).cpu().numpy()
         if self.is_sdf:
             field = -field  # positive inside, like occupancy
@@ -291,14 +291,17 @@ class Volume(torch.nn.Module):
         return trimesh.Trimesh(verts + lo.cpu().numpy(), faces[:, ::-1], process=False)
 
 
-def _select(out, b: int):
-    """A view of one body of a batched output with the fields the volume reads."""
-    class _One:
-        pass
-    one = _One()
-    for name in ("vertices", "joints", "full_pose"):
-        setattr(one, name, getattr(out, name)[b:b + 1])
-    return one
+class _OneBody:
+    """Body b of a batched output, with the fields a Volume reads."""
+
+    def __init__(self, out, b: int):
+        for name in ("vertices", "joints", "full_pose"):
+            setattr(self, name, getattr(out, name)[b:b + 1])
+
+
+def select_body(out, b: int):
+    """A one-body view (batch of 1) of body b of a batched body output, for any volume query."""
+    return _OneBody(out, b)
 
 
 MODELS = ("volsmpl", "coap")

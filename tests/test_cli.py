@@ -34,3 +34,17 @@ def test_user_errors_exit_2(tmp_path, capsys):
     assert "unknown pose" in capsys.readouterr().err
     assert main(["body", "info", "--model", str(tmp_path / "missing.npz")]) == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_demo_with_checkpoint_writes_sdf_slice(tmp_path):
+    import volsmpl
+    from volsmpl.checkpoint import save_checkpoint
+    from volsmpl.nn.config import VolumeConfig
+    cfg = VolumeConfig(latent_dim=16, encoder_hidden=16, encoder_blocks=2, n_surface_samples=64, decoder_hidden=16, nbw_rank=2)
+    vol = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=cfg)
+    save_checkpoint(tmp_path / "m", vol.net.state_dict(), cfg.to_dict(), {"body_fingerprint": vol.fingerprint})
+    assert main(["demo", "--out", str(tmp_path / "o"), "--poses", "t_pose", "--checkpoint", str(tmp_path / "m"),
+                 "--resolution", "24"]) == 0
+    import cv2
+    img = cv2.imread(str(tmp_path / "o" / "sdf_slice.png"))
+    assert img is not None and (img[..., 1] > 100).any()  # the green true-mesh section is drawn
