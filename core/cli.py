@@ -12,6 +12,7 @@ SUBCOMMANDS = {
     "body": "volsmpl.body.cli",
     "demo": "volsmpl.demo",
     "eval": "volsmpl.evaluate",
+    "selfpen": "volsmpl.apps.selfpen.cli",
     "train": "volsmpl.train",
 }
 

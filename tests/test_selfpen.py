@@ -1,0 +1,220 @@
+"""Self-intersection app: exact triangle counter, case set, pose repair loop, CLI."""
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+import torch
+
+import volsmpl
+from volsmpl.apps.selfpen import cases as C
+from volsmpl.apps.selfpen import triangles as T
+from volsmpl.apps.selfpen.optimize import RepairResult, SelfPenConfig, pose_change_deg, repair_case, summarize
+from volsmpl.cli import main as cli_main
+
+BASE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # in the plane z = 0
+
+# name -> (second triangle, expected intersection with BASE)
+HANDMADE = {
+    "crossing": ([[0.2, 0.25, -0.5], [0.6, 0.25, 0.5], [0.2, 0.25, 0.5]], True),
+    "edge_through_face": ([[0.3, 0.3, -0.5], [0.3, 0.3, 0.5], [0.3, 2.0, 0.5]], True),
+    "vertex_on_face": ([[0.2, 0.2, 0.0], [0.2, 0.2, 1.0], [0.5, 0.2, 1.0]], True),
+    "coplanar_overlap": ([[0.3, 0.3, 0.0], [1.3, 0.3, 0.0], [0.3, 1.3, 0.0]], True),
+    "coplanar_inside": ([[0.1, 0.1, 0.0], [0.3, 0.1, 0.0], [0.1, 0.3, 0.0]], True),
+    "coplanar_disjoint": ([[0.6, 0.6, 0.0], [1.6, 0.6, 0.0], [0.6, 1.6, 0.0]], False),
+    "parallel": ([[0.0, 0.0, 0.1], [1.0, 0.0, 0.1], [0.0, 1.0, 0.1]], False),
+    "above_tilted": ([[0.2, 0.2, 0.01], [0.8, 0.2, 0.5], [0.2, 0.8, 0.5]], False),
+    "plane_crossing_outside": ([[0.6, 0.6, -0.5], [0.6, 0.6, 0.5], [1.5, 0.6, 0.0]], False),  # crosses z=0 beyond the hypotenuse
+    "near_miss_edge": ([[0.5 + 1e-6, 0.5 + 1e-6, -1.0], [0.5 + 1e-6, 0.5 + 1e-6, 1.0], [2.0, 2.0, 0.0]], False),
+}
+
+
+@pytest.mark.parametrize("name", sorted(HANDMADE))
+def test_handmade_pairs(name):
+    tri, expected = HANDMADE[name]
+    tri = np.array(tri)
+    assert T.exact_triangles_intersect(BASE, tri) == expected
+    fast = T.triangles_intersect(np.stack([BASE, tri]), np.stack([tri, BASE]))  # both argument orders
+    assert fast.tolist() == [expected, expected]
+
+
+def test_shared_vertex_pairs_ignored():
+    # two triangles meeting at vertex 0 (one even folds through the other's plane): touching, but neighbours
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0.3, 0.3, -0.5], [0.3, 0.3, 0.5]], float)
+    f = np.array([[0, 1, 2], [0, 3, 4]])
+    assert T.triangles_intersect(v[f[:1]], v[f[1:]]).tolist() == [True]
+    assert len(T.intersecting_pairs(v, f)) == 0
+    # the same geometry with vertex 0 duplicated (no shared index) counts
+    v2 = np.vstack([v, v[:1]])
+    assert T.intersecting_pairs(v2, np.array([[0, 1, 2], [5, 3, 4]])).tolist() == [[0, 1]]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_random_soup_matches_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    n = 45
+    v = rng.uniform(0, 1, (70, 3))
+    faces = np.array([rng.choice(70, 3, replace=False) for _ in range(n)])  # random sharing of vertices
+    v = v.copy()
+    # shrink each face toward its centroid a bit, on its own vertex copy, for a mix of sizes
+    tri = v[faces]
+    tri = tri.mean(1, keepdims=True) + (tri - tri.mean(1, keepdims=True)) * rng.uniform(0.2, 1.0, (n, 1, 1))
+    v2, f2 = tri.reshape(-1, 3), np.arange(3 * n).reshape(n, 3)
+    for verts, fcs in ((v, faces), (v2, f2)):
+        ref = T.brute_force_pairs(verts, fcs)
+        got = T.intersecting_pairs(verts, fcs)
+        assert len(ref) > 5
+        np.testing.assert_array_equal(got, ref)
+
+
+def test_broad_phase_equals_all_pairs_aabb(body):
+    c = C.load_cases(names=["deep_squat"])[0]
+    v = body(betas=c.betas[None], body_pose=c.body_pose[None]).vertices[0].double().numpy()
+    f = body.faces
+    sel = np.sort(np.argsort(v[f].mean(1)[:, 1])[:2500])  # the lowest faces (folded legs): many overlapping boxes
+    tri = v[f[sel]]
+    lo, hi = tri.min(1), tri.max(1)
+    ov = ((lo[:, None] <= hi[None]) & (lo[None] <= hi[:, None])).all(-1)
+    shared = (f[sel][:, None, :, None] == f[sel][None, :, None, :]).any((2, 3))
+    i, j = np.nonzero(np.triu(ov & ~shared, 1))
+    assert len(i) > 1000
+    np.testing.assert_array_equal(T.candidate_pairs(tri, f[sel], chunk=5000), np.stack([i, j], 1))
+
+
+def test_body_count_is_fast_and_tpose_has_no_pose_collisions(body):
+    c = C.load_cases(names=["crossed_legs_seated"])[0]
+    v = body(betas=c.betas[None], body_pose=c.body_pose[None]).vertices[0].numpy()
+    T.count_intersections(v, body.faces)
+    t = time.perf_counter()
+    n = T.count_intersections(v, body.faces)
+    assert time.perf_counter() - t < 2.0
+    assert n > 0
+    res = T.body_collisions(body, c.betas, torch.zeros(3), torch.zeros(69))
+    assert len(res["pairs"]) == 0 and len(res["raw"]) == len(res["rest"])
+
+
+def test_case_file_regenerates_identically(body):
+    text = C.cases_to_json(C.generate_cases(body))  # raises if a recipe does not self-intersect
+    assert C.CASES_FILE.read_text() == text
+    cases = C.load_cases()
+    assert len(cases) >= 16 and all(c.collisions > 0 for c in cases)
+    assert len({tuple(c.betas.tolist()) for c in cases}) >= 12  # varied shapes
+
+
+def _write(tmp_path, cases):
+    p = tmp_path / "cases.json"
+    p.write_text(json.dumps({"cases": cases}))
+    return p
+
+
+def _case_dict(**over):
+    d = {"name": "x", "betas": [0.0] * 10, "global_orient": [0.0] * 3, "body_pose": [0.0] * 69}
+    d.update(over)
+    return d
+
+
+def test_bad_case_input(tmp_path):
+    nan_pose = [0.0] * 69
+    nan_pose[5] = float("nan")
+    with pytest.raises(ValueError, match="'body_pose' contains NaN or Inf at indices \\[5\\]"):
+        C.load_cases(_write(tmp_path, [_case_dict(body_pose=nan_pose)]))
+    with pytest.raises(ValueError, match="'body_pose' must have 69 numbers"):
+        C.load_cases(_write(tmp_path, [_case_dict(body_pose=[0.0] * 72)]))
+    with pytest.raises(ValueError, match="missing 'betas'"):
+        C.load_cases(_write(tmp_path, [{"name": "x", "global_orient": [0] * 3, "body_pose": [0] * 69}]))
+    with pytest.raises(ValueError, match="unknown case"):
+        C.load_cases(names=["no_such_case"])
+    with pytest.raises(FileNotFoundError, match="case file not found"):
+        C.load_cases(tmp_path / "missing.json")
+
+
+def test_cli_bad_input_messages(tmp_path, capsys):
+    assert cli_main(["selfpen", "--model", "smplx_mesh", "--out", str(tmp_path)]) == 2
+    assert "unknown model(s) ['smplx_mesh']" in capsys.readouterr().err
+    nan_pose = [0.0] * 69
+    nan_pose[0] = float("nan")
+    f = _write(tmp_path, [_case_dict(body_pose=nan_pose)])
+    assert cli_main(["selfpen", "--model", "volsmpl", "--random-init", "--case-file", str(f), "--out", str(tmp_path)]) == 2
+    assert "contains NaN" in capsys.readouterr().err
+
+
+def test_cli_without_checkpoint_stops_with_attach_volume_message(tmp_path, capsys):
+    from volsmpl.volume import DEFAULT_CHECKPOINTS
+    if DEFAULT_CHECKPOINTS["coap"].with_suffix(".safetensors").exists():
+        pytest.skip("a COAP checkpoint ships now")
+    assert cli_main(["selfpen", "--model", "coap", "--cases", "deep_squat", "--out", str(tmp_path)]) == 2
+    assert "no trained coap checkpoint ships for this body" in capsys.readouterr().err
+
+
+class _StubVolume(torch.nn.Module):
+    """selfpen_loss = sum of the left wrist's height; 'penetration points' for the first k calls."""
+
+    def __init__(self, k: int):
+        super().__init__()
+        self.w = torch.nn.Parameter(torch.ones(1))
+        self.k, self.calls = k, 0
+
+    def selfpen_loss(self, out, n_points=300, generator=None, return_points=False):
+        self.calls += 1
+        pts = torch.zeros(5 if self.calls <= self.k else 0, 3)
+        return out.joints[:, 20, 1] * self.w, [pts]
+
+
+def test_repair_loop_stops_when_no_points_remain(body):
+    case = C.load_cases(names=["hands_through_thighs"])[0]
+    vol = _StubVolume(k=3)
+    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_prior=1.0))
+    assert r.status == "resolved" and r.iterations == 3 and r.points == [5, 5, 5, 0]
+    assert len(r.step_ms) == 3 and r.total_s > 0 and r.pose_change_deg > 0
+    assert vol.w.requires_grad and vol.w.grad is None  # only the pose was optimised
+    with torch.no_grad():
+        wrist = lambda p: body(betas=case.betas[None], body_pose=torch.as_tensor(p)[None]).joints[0, 20, 1]  # noqa: E731
+        assert wrist(r.body_pose) < wrist(case.body_pose) - 1e-3  # moved down the loss gradient
+    r2 = repair_case(body, _StubVolume(k=100), case, SelfPenConfig(lr=0.05, max_iters=4))
+    assert r2.status == "max_iters" and r2.iterations == 4
+
+
+def test_repair_random_volume_and_tpose_unchanged(body, tiny_config):
+    vol = volsmpl.attach_volume(body, pretrained=False, config=tiny_config)
+    case = C.load_cases(names=["knee_into_chest"])[0]
+    r = repair_case(body, vol, case, SelfPenConfig(max_iters=2, n_points=64))
+    assert r.status in ("no_volume_points", "resolved", "max_iters") and r.iterations <= 2
+    assert r.collisions_before == case.collisions and np.isfinite(r.body_pose).all()
+    tpose = C.Case("t_pose", case.betas, torch.zeros(3), torch.zeros(69))
+    r = repair_case(body, vol, tpose, SelfPenConfig())
+    assert r.status == "no_intersection" and r.iterations == 0 and r.collisions_after == 0
+    assert r.body_pose == [0.0] * 69 and r.pose_change_deg == 0.0
+    assert summarize([r])["cases_with_collisions"] == 0
+    bad = C.Case("bad", case.betas, torch.zeros(3), torch.full((69,), float("nan")))
+    with pytest.raises(ValueError, match="'body_pose' contains NaN"):
+        repair_case(body, vol, bad)
+
+
+def test_pose_change_geodesic():
+    a = np.zeros(69)
+    b = np.zeros(69)
+    b[3:6] = [0.0, 0.0, np.radians(46.0)]  # one joint turned by 46 degrees
+    assert pose_change_deg(a, b) == pytest.approx(46.0 / 23)
+    assert pose_change_deg(b, b) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_cli_end_to_end_random_init(tmp_path):
+    rc = cli_main(["selfpen", "--model", "volsmpl,coap", "--cases", "arm_through_head", "--random-init",
+                   "--max-iters", "1", "--n-points", "32", "--threads", "1", "--out", str(tmp_path), "--render", "1"])
+    assert rc == 0
+    res = json.loads((tmp_path / "results.json").read_text())
+    assert set(res["summary"]) == {"volsmpl", "coap"} and res["random_init"]
+    for m in ("volsmpl", "coap"):
+        (c,) = res["cases"][m]
+        assert c["name"] == "arm_through_head" and c["collisions_before"] > 0 and len(c["body_pose"]) == 69
+    assert (tmp_path / "render_arm_through_head.png").stat().st_size > 1000
+
+
+@pytest.mark.needs_checkpoint
+def test_repaired_case_has_fewer_collisions(body):
+    vol = volsmpl.attach_volume(body)
+    case = C.load_cases(names=["forearm_through_torso_left"])[0]
+    r = repair_case(body, vol, case, SelfPenConfig())
+    assert r.iterations > 0 and r.collisions_after < r.collisions_before
