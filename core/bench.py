@@ -679,9 +679,12 @@ def model_rows(result: dict) -> Tuple[List[str], List[List[str]]]:
             rows.append([name, "-", "skipped"] + [""] * (len(head) - 3))
             continue
         acc = result.get("accuracy", {}).get(e["model"])
-        for batch in e.get("skipped_batches", {}):
-            rows.append([name, batch, "skipped (too slow)"] + [""] * (len(head) - 3))
-        for batch, r in e["batches"].items():
+        skipped = e.get("skipped_batches", {})
+        for batch in sorted(set(e["batches"]) | set(skipped), key=int):
+            if batch in skipped:
+                rows.append([name, batch, "skipped (too slow)"] + [""] * (len(head) - 3))
+                continue
+            r = e["batches"][batch]
             rows.append([name, batch, _f(r["t_ms"], "{:.1f}"), _f(r["t_query_ms"], "{:.1f}"),
                          str(r.get("repeats_used", len(r["t_ms_all"]))), _mem(r["mem_bytes"]),
                          _mem(r.get("mem_query_bytes")), f"{r['params'] / 1e6:.2f} M", _f(r["evals_per_point"], "{:.2f}"), _f(r["decoder_gflop"], "{:.2f}"),
