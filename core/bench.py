@@ -103,6 +103,8 @@ class BenchConfig:
         budget_s: wall-time budget of one (model, batch) measurement: when warmup + repeats calls would exceed
             it (judged from the first call), the worker drops the warm-up (the two memory calls warm up) and
             lowers repeats (at least 1); the counts used are reported.
+        max_mem_fraction: skip a (model, batch) whose query memory, extrapolated linearly in B from the
+            smaller batch, would exceed this fraction of the machine's (or GPU's) memory.
         max_call_s: skip a (model, batch) whose single encode+query, extrapolated linearly in B from the
             model's smaller batch, would exceed this (dense COAP at B=8 takes minutes per call on a CPU).
         timeout_s: limit of each subprocess.
@@ -128,6 +130,7 @@ class BenchConfig:
     evaluate_check: bool = True
     budget_s: float = 120.0
     max_call_s: float = 60.0
+    max_mem_fraction: float = 0.5
     timeout_s: int = 3600
 
     def __post_init__(self):
@@ -264,8 +267,11 @@ def _build_volume(body, spec: dict):
         torch.manual_seed(int(spec.get("init_seed", 0)))
         vol = attach_volume(body, model=spec["model"], pretrained=False, dense=spec["dense"])
     if spec["dense"]:
-        # the published implementations evaluate all (body, part, point) entries in one pass: no chunking
+        # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
+        # no cache tiling
         vol.chunk_elems = 1 << 62
+        if hasattr(vol.net, "TILE_ROWS"):
+            vol.net.TILE_ROWS = 1 << 62
     return vol
 
 
@@ -599,9 +605,15 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
         entry = {"status": "ok", "model": base, "dense": MODELS[name][1], "checkpoint": ckpts[base], "batches": {}}
         for batch in sorted(cfg.batches):
             est = _estimate_call_s(entry["batches"], batch)
+            est_mem = _estimate_mem_bytes(entry["batches"], batch)
+            note = None
             if est is not None and est > cfg.max_call_s:
                 note = (f"{name} B={batch}: skipped, one encode+query would take ~{est:.0f} s (linear in B from "
                         f"the smaller batch) > max_call_s={cfg.max_call_s:g} s")
+            elif est_mem is not None and est_mem > cfg.max_mem_fraction * _total_memory_bytes(cfg.device):
+                note = (f"{name} B={batch}: skipped, the query would need ~{est_mem / 2**30:.1f} GiB (linear in B from "
+                        f"the smaller batch) > {cfg.max_mem_fraction:.0%} of this machine's memory")
+            if note is not None:
                 entry.setdefault("skipped_batches", {})[str(batch)] = note
                 result["notes"].append(note)
                 log(note)
@@ -627,6 +639,21 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
     result["ratios"] = compute_ratios(result["models"], result.get("bodybody"))
     result["notes"] += _caveats(cfg, result)
     return result
+
+
+def _estimate_mem_bytes(done: dict, batch: int) -> Optional[float]:
+    """Peak query memory at `batch`, extrapolated linearly from the largest measured smaller batch."""
+    smaller = [int(b) for b in done if int(b) < batch]
+    if not smaller:
+        return None
+    b = max(smaller)
+    return done[str(b)]["mem_bytes"] * batch / b
+
+
+def _total_memory_bytes(device) -> int:
+    if str(device).startswith("cuda"):
+        return torch.cuda.get_device_properties(torch.device(device)).total_memory
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
 def _estimate_call_s(done: dict, batch: int) -> Optional[float]:
