@@ -167,6 +167,12 @@ class Partition(torch.nn.Module):
         return torch.einsum("bkji,bknj->bkni", R, points[:, None] - t[:, :, None])
 
     @staticmethod
+    def to_part_frames(x: torch.Tensor, G: torch.Tensor) -> torch.Tensor:
+        """Per-part point sets into their own part frames: x (B, K, n, 3), G (B, K, 4, 4) -> (B, K, n, 3)."""
+        R, t = G[..., :3, :3], G[..., :3, 3]
+        return torch.einsum("bkji,bknj->bkni", R, x - t[:, :, None])
+
+    @staticmethod
     def uncanonicalize(local: torch.Tensor, G: torch.Tensor) -> torch.Tensor:
         """Part-frame points back to the world: x = G_k x_k.  local (B, K, N, 3) -> (B, K, N, 3)."""
         R, t = G[..., :3, :3], G[..., :3, 3]
@@ -180,8 +186,7 @@ class Partition(torch.nn.Module):
         """
         B, K = G.shape[:2]
         pv = vertices[:, self.tight_vertices.reshape(-1)].reshape(B, K, -1, 3)
-        R, t = G[..., :3, :3], G[..., :3, 3]
-        local = torch.einsum("bkji,bknj->bkni", R, pv - t[:, :, None])
+        local = self.to_part_frames(pv, G)
         lo, hi = local.amin(dim=2), local.amax(dim=2)
         center, half = 0.5 * (lo + hi), 0.5 * (hi - lo) * (1.0 + self.box_padding)
         return center - half, center + half

@@ -55,14 +55,13 @@ class Volume(torch.nn.Module):
     """Volumetric (SDF) extension of one body model; see the module docstring.
 
     Args:
-        body: the body model it is attached to (volsmpl.Body or smplx SMPL/SMPL-H/SMPL-X).
         net: the network (VolumetricSMPLNet, or CoapNet for the occupancy baseline).
         dense: evaluate every part decoder on every point (reference path) instead of only the
             (point, part) pairs inside part boxes (default, same values and gradients).
         chunk_elems: memory budget of one query chunk in (body, part, point) entries.
     """
 
-    def __init__(self, body, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
+    def __init__(self, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
                  dense: bool = False, chunk_elems: int = 1 << 21):
         super().__init__()
         self.net = net
@@ -119,9 +118,7 @@ class Volume(torch.nn.Module):
                              f"{next(self.net.parameters()).dtype} on {p.faces.device}; move it with body.volume.to(device, dtype).")
         G = p.part_transforms(out.full_pose, out.joints)
         box_min, box_max = p.boxes(v, G)
-        surf = p.surface_points(v, generator)  # (B, K, n, 3)
-        R, t = G[..., :3, :3], G[..., :3, 3]
-        local = torch.einsum("bkji,bknj->bkni", R, surf - t[:, :, None])
+        local = p.to_part_frames(p.surface_points(v, generator), G)  # (B, K, n, 3)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=self.net.encode(local), stamp=_stamp(out))
 
     # ------------------------------------------------------------------ evaluation core
@@ -362,7 +359,7 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
             raise ValueError(f"checkpoint {checkpoint} does not fit the {model} network for this body "
                              f"({partition.num_parts} parts): {str(e)[:300]}") from e
     dev = body.v_template.device
-    volume = Volume(body, net, partition, fp, dense=dense).to(dev)
+    volume = Volume(net, partition, fp, dense=dense).to(dev)
     volume.meta = meta
     volume.eval()
     # plain attribute, not a submodule: body.to(...) does not move the volume (use body.volume.to(...))
