@@ -28,6 +28,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 
 import torch
 import torch.distributed as dist
@@ -127,7 +128,8 @@ def occupancy_loss(pred: torch.Tensor, gt: torch.Tensor) -> tuple[torch.Tensor, 
 
 
 def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> dict:
-    """The training batch of (step, rank): body parameters, query points (B, N, 3), exact SDF (B, N)."""
+    """The training batch of (step, rank): body parameters, the posed bodies (vertices, joints, full_pose),
+    query points (B, N, 3), exact SDF (B, N)."""
     seed = (cfg.seed * 1_000_003 + step) * 131 + rank
     g = torch.Generator().manual_seed(seed)
     B = cfg.batch_size
@@ -144,20 +146,20 @@ def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> d
         pts = sample_training_queries(out.vertices, body.faces_tensor, G, bmin, bmax, cfg.n_uniform, cfg.n_surface,
                                       sigma=cfg.surface_sigma, face_ids_per_part=partition.tight_face_ids, generator=g)
         gt = batch_mesh_sdf(out.vertices, body.faces, pts, nsamples=cfg.gt_rays, check_closed=False)
-    return {"params": params, "points": pts, "sdf": gt, "seed": seed}
+    posed = {"vertices": out.vertices, "joints": out.joints, "full_pose": out.full_pose}
+    return {"params": params, "posed": posed, "points": pts, "sdf": gt, "seed": seed}
 
 
 class TrainStep(torch.nn.Module):
     """loss = forward(batch): one module so DistributedDataParallel sees the whole computation."""
 
-    def __init__(self, body, volume, cfg: TrainConfig):
+    def __init__(self, volume, cfg: TrainConfig):
         super().__init__()
         self.net = volume.net
-        self._body, self._volume, self.cfg = body, volume, cfg
+        self._volume, self.cfg = volume, cfg
 
     def forward(self, batch: dict):
-        with torch.no_grad():
-            out = self._body(**batch["params"])
+        out = SimpleNamespace(**batch["posed"])  # posed once, by make_batch
         g = torch.Generator().manual_seed(batch["seed"])
         enc = self._volume.encode(out, generator=g)  # fresh surface samples: augmentation
         pred = self._volume.query_encoded(enc, batch["points"])
@@ -177,7 +179,8 @@ def _accumulate(model, batch: dict, micro: int, ddp: bool) -> tuple[float, dict]
     loss, parts = 0.0, {"sign": 0.0, "abs": 0.0}
     for i, s in enumerate(idx):
         e = min(B, s + max(1, micro))
-        sub = {"params": {k: v[s:e] for k, v in batch["params"].items()}, "points": batch["points"][s:e],
+        sub = {"params": {k: v[s:e] for k, v in batch["params"].items()},
+               "posed": {k: v[s:e] for k, v in batch["posed"].items()}, "points": batch["points"][s:e],
                "sdf": batch["sdf"][s:e], "seed": batch["seed"] * 7919 + i}
         sync = contextlib.nullcontext() if (not ddp or i == len(idx) - 1) else model.no_sync()
         with sync:
@@ -298,7 +301,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     volume.to(device)
     volume.train()
     volume.net.encoder_bf16 = cfg.encoder_bf16
-    step_mod = TrainStep(body.to(device), volume, cfg)
+    step_mod = TrainStep(volume, cfg)  # the body stays on the CPU: batches (and exact GT) are made there
     model = torch.nn.parallel.DistributedDataParallel(step_mod) if world > 1 else step_mod
     if rank == 0:
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -315,7 +318,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         td = time.time()
         batch = make_batch(cfg, body, volume.partition, step, rank)
         batch = {**batch, "points": batch["points"].to(device), "sdf": batch["sdf"].to(device),
-                 "params": {k: v.to(device) for k, v in batch["params"].items()}}
+                 "params": {k: v.to(device) for k, v in batch["params"].items()},
+                 "posed": {k: v.to(device) for k, v in batch["posed"].items()}}
         data_sec = time.time() - td
         for g_ in opt.param_groups:
             g_["lr"] = lr_at(cfg, step)

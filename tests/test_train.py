@@ -69,7 +69,7 @@ def test_micro_batches_give_the_full_batch_gradient(body):
     torch.manual_seed(0)
     vol = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=TINY)
     vol.train()
-    step = TrainStep(vol._body if hasattr(vol, "_body") else volsmpl.create_body(), vol, cfg)
+    step = TrainStep(vol, cfg)
     batch = make_batch(cfg, body, vol.partition, 0)
     grads = []
     for micro in (2, 1):
@@ -81,7 +81,8 @@ def test_micro_batches_give_the_full_batch_gradient(body):
     vol.net.zero_grad()
     loss = 0
     for i in range(2):
-        sub = {"params": {k: v[i:i + 1] for k, v in batch["params"].items()}, "points": batch["points"][i:i + 1],
+        sub = {"params": {k: v[i:i + 1] for k, v in batch["params"].items()},
+               "posed": {k: v[i:i + 1] for k, v in batch["posed"].items()}, "points": batch["points"][i:i + 1],
                "sdf": batch["sdf"][i:i + 1], "seed": batch["seed"] * 7919 + i}
         l, _ = step(sub)
         (l / 2).backward()
@@ -94,7 +95,7 @@ def test_learns_fixed_batch(body):
     torch.manual_seed(0)
     vol = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=TINY)
     vol.train()
-    step = TrainStep(body, vol, cfg)
+    step = TrainStep(vol, cfg)
     batch = make_batch(cfg, body, vol.partition, 0)
     opt = torch.optim.Adam(vol.net.parameters(), lr=3e-3)
     losses = []
