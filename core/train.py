@@ -11,6 +11,14 @@ sgn has no useful derivative, so the sign term back-propagates a straight-throug
 The absolute-value term is in metres^2; abs_weight = 1e4 measures it in cm^2 so that both terms are
 O(1) (the paper's plain sum leaves it ~1e-4 of the sign term).
 
+Residual of the distance term (`residual`): where the predicted sign is right, (|d~| - |d|)^2 equals
+(d~ - d)^2. Where it is wrong the literal |d| term pulls d~ *away* from the surface on the wrong side,
+against the sign term: with tau = 1 cm and abs_weight = 1e4 the two gradients cancel at |d~| = |d| - 2 cm,
+so every wrong-sign point more than 2 cm from the surface is a stable fixed point (measured: the first
+1,500 steps plateaued at 10.5 % wrong signs). The default `residual='signed'` therefore uses (d~ - d)^2,
+identical to eq. 3 wherever the sign is right and pointing across the surface where it is not;
+`residual='abs'` is eq. 3 to the letter.
+
 Data of step s on rank r depend only on (seed, s, r), so a resumed run continues exactly. Checkpoints
 (model + optimiser, safetensors; nothing pickled) are written to <out>/ckpt-<step>/ and published by
 atomically replacing <out>/latest; <out>/log.csv holds the losses. Multi-process: torchrun (DDP, gloo on
@@ -55,6 +63,7 @@ class TrainConfig:
     surface_sigma: tuple = (0.01, 0.05)  # metres; see volsmpl.groundtruth
     sign_tau: float = 0.01          # metres: straight-through gradient scale of the sign term
     abs_weight: float = 1e4         # |SDF| term in cm^2
+    residual: str = "signed"        # distance term: 'signed' (d~ - d)^2 or 'abs' (|d~| - |d|)^2 (eq. 3 literally)
     pose_mode: str = "realistic"
     global_orient_scale: float = 0.0  # rad sd of random global orientation (parts are in local frames anyway)
     gt_rays: int = 5                # ray-voting rays for the ground-truth sign
@@ -96,6 +105,8 @@ class TrainConfig:
             d["model"] = CoapConfig.from_dict(d.get("model", {}))
         elif "model" in d:
             d["model"] = VolumeConfig.from_dict(d["model"])
+        if d.get("residual", "signed") not in ("signed", "abs"):
+            raise ValueError(f"residual must be 'signed' or 'abs', got {d['residual']!r}")
         if "surface_sigma" in d:
             d["surface_sigma"] = tuple(d["surface_sigma"])
         return cls(**d)
@@ -108,6 +119,7 @@ def lr_at(cfg: TrainConfig, step: int) -> float:
 
 def sdf_loss(pred: torch.Tensor, gt: torch.Tensor, cfg: TrainConfig) -> tuple[torch.Tensor, dict]:
     """Eq. 3: l2(sgn(d~), sgn(d)) + abs_weight * l2(|d~|, |d|), means over points. pred, gt (B, N) metres.
+    With cfg.residual == 'signed' (default) the distance term is (d~ - d)^2 (module docstring).
 
     The sign term's forward value is exactly the paper's; its gradient is a straight-through estimate,
     d sgn(d~)/d d~ := 1/sign_tau, so a wrong sign is pushed across the surface at any distance (a tanh
@@ -116,7 +128,8 @@ def sdf_loss(pred: torch.Tensor, gt: torch.Tensor, cfg: TrainConfig) -> tuple[to
     scaled = pred / cfg.sign_tau
     sgn = torch.sign(pred).detach() + scaled - scaled.detach()
     sign = (sgn - torch.sign(gt)).square().mean()
-    absl = (pred.abs() - gt.abs()).square().mean() * cfg.abs_weight
+    res = pred - gt if cfg.residual == "signed" else pred.abs() - gt.abs()
+    absl = res.square().mean() * cfg.abs_weight
     return sign + absl, {"sign": float(sign.detach()), "abs": float(absl.detach())}
 
 

@@ -27,8 +27,10 @@ def test_loss_terms():
     loss, parts = sdf_loss(gt.clone(), gt, cfg)  # perfect prediction
     assert parts["abs"] == 0 and parts["sign"] == 0
     wrong = -gt
-    _, p2 = sdf_loss(wrong, gt, cfg)
+    _, p2 = sdf_loss(wrong, gt, TrainConfig(residual="abs"))
     assert abs(p2["sign"] - 4.0) < 1e-3 and p2["abs"] == 0  # all signs wrong: (±1 ∓ 1)^2 = 4
+    _, p2s = sdf_loss(wrong, gt, cfg)  # signed residual: (d~ - d)^2 = (2d)^2
+    assert p2s["abs"] == pytest.approx(cfg.abs_weight * (4 * gt.square()).mean().item(), rel=1e-5)
     _, p3 = sdf_loss(gt + 0.01, gt, cfg)
     assert abs(p3["abs"] - cfg.abs_weight * 1e-4) < 1e-6
     # the sign term's gradient reaches wrong signs however far they are (straight-through), none for right ones
@@ -36,6 +38,21 @@ def test_loss_terms():
     l, _ = sdf_loss(pred, torch.tensor([[-0.05, -0.04, 0.1]]), TrainConfig(abs_weight=0.0))
     l.backward()
     assert pred.grad[0, 0] > 0 and pred.grad[0, 1] == 0 and pred.grad[0, 2] == 0
+
+
+def test_wrong_sign_fixed_point_only_with_abs_residual():
+    # 3 cm outside, predicted 1 cm inside: eq. 3's literal |d| term cancels the sign term's gradient
+    # (tau 1 cm, abs_weight 1e4: -4/tau + 2e4 (|d~| - |d|) sign(d~) = -400 + 400), the signed residual does not
+    gt = torch.tensor([[0.03]], dtype=torch.float64)
+    grads = {}
+    for residual in ("abs", "signed"):
+        pred = torch.tensor([[-0.01]], dtype=torch.float64, requires_grad=True)
+        sdf_loss(pred, gt, TrainConfig(residual=residual))[0].backward()
+        grads[residual] = float(pred.grad)
+    assert grads["abs"] == pytest.approx(0.0, abs=1e-9)
+    assert grads["signed"] < -100  # descent raises d~ towards the right (positive) side
+    with pytest.raises(ValueError, match="residual"):
+        TrainConfig.from_dict({"residual": "l1"})
 
 
 def test_lr_schedule_and_config_roundtrip():
