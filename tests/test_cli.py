@@ -48,3 +48,18 @@ def test_demo_with_checkpoint_writes_sdf_slice(tmp_path):
     import cv2
     img = cv2.imread(str(tmp_path / "o" / "sdf_slice.png"))
     assert img is not None and (img[..., 1] > 100).any()  # the green true-mesh section is drawn
+
+
+def test_help_lists_every_subcommand_and_imports_only_the_chosen_one():
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom volsmpl.cli import main, SUBCOMMANDS\n"
+            "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "heavy = [m for m, _ in SUBCOMMANDS.values() if m in sys.modules]\n"
+            "print('HEAVY', heavy)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    for name in ("bench", "body", "demo", "eval", "selfpen", "train"):
+        assert name in r.stdout
+    assert "HEAVY []" in r.stdout
