@@ -271,8 +271,12 @@ def _dist_info():
 
 
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps: int | None = None,
-          device: str = "cpu", quiet: bool = False, init: str | Path | None = None) -> dict:
-    """Run (or resume) training. max_steps stops early (this process) without changing the schedule.
+          device: str = "cpu", quiet: bool = False, init: str | Path | None = None,
+          max_seconds: float | None = None) -> dict:
+    """Run (or resume) training. max_steps stops early (this process) without changing the schedule;
+    so does max_seconds, a budget of cumulative training time (seconds over all processes' runs of
+    this model, recorded as meta.training.train_seconds in every checkpoint): equal budgets compare
+    models at equal compute.
 
     resume continues the run in out_dir exactly (weights, Adam state, step). init starts a new run from
     a model checkpoint (e.g. one committed by an earlier session): its weights and its training step,
@@ -287,7 +291,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     torch.manual_seed(cfg.seed)
     body = create_body()
     volume = attach_volume(body, pretrained=False, model=cfg.model_kind, config=cfg.model)
-    start = 0
+    start, spent = 0, 0.0
     ck = latest_checkpoint(out_dir) if resume else None
     if resume and ck is None and not quiet and rank == 0:
         print(f"no checkpoint in {out_dir}: starting from scratch", file=sys.stderr)
@@ -301,6 +305,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
                              f"config (saved in its JSON under meta.training.train_config) with --config.")
         volume.net.load_state_dict(state)
         start = int(meta.get("training", {}).get("step", 0))
+        spent = float(meta.get("training", {}).get("train_seconds", 0.0))
     if ck is not None:
         from safetensors.torch import load_file
         state, _, meta = load_checkpoint(ck / "model", expected_fingerprint=volume.fingerprint)
@@ -311,6 +316,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         volume.net.load_state_dict(state)
         _load_optimizer(opt, load_file(str(ck / "optimizer.safetensors")), json.loads((ck / "optimizer.json").read_text()))
         start = meta["training"]["step"]
+        spent = float(meta["training"].get("train_seconds", 0.0))
     volume.to(device)
     volume.train()
     volume.net.encoder_bf16 = cfg.encoder_bf16
@@ -326,6 +332,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     if new_log:
         writer.writerow(["step", "loss", "sign", "abs", "lr", "sec_per_step", "data_sec"])
     end = cfg.steps if max_steps is None else min(cfg.steps, start + max_steps)
+    if max_seconds is not None and spent >= max_seconds:
+        end = start  # the budget is spent already
+        if rank == 0 and not quiet:
+            print(f"{out_dir}: {spent / 3600:.2f} h of training already reach the budget of {max_seconds / 3600:.2f} h")
     t0, losses, last = time.time(), [], {}
     for step in range(start, end):
         td = time.time()
@@ -352,8 +362,16 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
                 eta = (cfg.steps - step - 1) * sps / 3600
                 print(f"\rstep {step + 1}/{cfg.steps} loss {loss:.4f} (sign {parts['sign']:.4f}, abs {parts['abs']:.4f}) "
                       f"lr {lr_at(cfg, step):.2e} {sps:.2f} s/step, ETA {eta:.1f} h", end="", flush=True)
-        if rank == 0 and ((step + 1) % cfg.ckpt_every == 0 or step + 1 == end):
-            save_training_state(out_dir, step + 1, volume, opt, cfg, {"loss": loss})
+        used = spent + time.time() - t0
+        over = max_seconds is not None and used >= max_seconds
+        if world > 1 and max_seconds is not None:  # every rank stops at the same step
+            flag = torch.tensor([float(over)])
+            dist.all_reduce(flag)
+            over = bool(flag.item() > 0)
+        if rank == 0 and ((step + 1) % cfg.ckpt_every == 0 or step + 1 == end or over):
+            save_training_state(out_dir, step + 1, volume, opt, cfg, {"loss": loss, "train_seconds": round(used, 1)})
+        if over:
+            break
     if logf:
         logf.close()
         if not quiet:
@@ -370,6 +388,8 @@ def add_parser(sub):
     p.add_argument("--out", default="runs/volsmpl", help="run folder: checkpoints, log.csv, config.json")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its latest checkpoint")
     p.add_argument("--max-steps", type=int, default=None, help="stop this process after so many steps")
+    p.add_argument("--max-hours", type=float, default=None,
+                   help="stop when the run's cumulative training time reaches this many hours (equal-compute budgets)")
     p.add_argument("--init", default=None, help="start from this model checkpoint's weights and step (new optimiser)")
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="override config fields, e.g. batch_size=4")
@@ -389,6 +409,7 @@ def run(args) -> int:
     if args.init and not args.config and not args.set:
         meta = json.loads(Path(str(args.init).removesuffix(".safetensors") + ".json").read_text())["meta"]
         cfg = TrainConfig.from_dict(meta["training"]["train_config"])
-    summary = train(cfg, args.out, resume=args.resume, max_steps=args.max_steps, device=args.device, init=args.init)
+    summary = train(cfg, args.out, resume=args.resume, max_steps=args.max_steps, device=args.device, init=args.init,
+                    max_seconds=None if args.max_hours is None else args.max_hours * 3600)
     print(f"done: step {summary.get('step')} loss {summary.get('loss')}")
     return 0

@@ -1,6 +1,7 @@
 """Training: loss definition, learning on a fixed batch, exact resume, micro-batching, DDP on gloo."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -136,6 +137,21 @@ def test_resume_continues_exactly(tmp_path):
     # the checkpoint is a normal volsmpl checkpoint
     vol = volsmpl.attach_volume(volsmpl.create_body(), checkpoint=tmp_path / "b" / "ckpt-00000004" / "model")
     assert vol.meta["training"]["step"] == 4
+
+
+def test_time_budget_is_cumulative_over_resumes(tmp_path):
+    cfg = dataclasses.replace(tiny_cfg(), ckpt_every=1000)
+    r1 = train(cfg, tmp_path / "a", max_seconds=1e-9, quiet=True)  # any step spends the budget
+    assert r1["step"] == 1 and (tmp_path / "a" / "latest").read_text() == "ckpt-00000001"
+    meta = json.loads((tmp_path / "a" / "ckpt-00000001" / "model.json").read_text())["meta"]
+    spent = meta["training"]["train_seconds"]
+    assert spent > 0
+    r2 = train(cfg, tmp_path / "a", resume=True, max_seconds=spent * 1.5 + 60, max_steps=2, quiet=True)
+    assert r2["step"] == 3  # budget left: runs on (stopped by max_steps)
+    meta = json.loads((tmp_path / "a" / "ckpt-00000003" / "model.json").read_text())["meta"]
+    assert meta["training"]["train_seconds"] > spent
+    r3 = train(cfg, tmp_path / "a", resume=True, max_seconds=spent / 2, quiet=True)  # spent already: no step
+    assert r3["losses"] == [] and (tmp_path / "a" / "latest").read_text() == "ckpt-00000003"
 
 
 @pytest.mark.slow
