@@ -2,7 +2,8 @@
 
 Every step draws B bodies (realistic random poses within joint limits, shapes from Anny's calibrated
 population), per part 256 points uniform in its padded box and 256 near the surface, exact signed
-distances to the posed mesh (open3d BVH distance + ray-voting sign), and minimises eq. 3:
+distances to the posed mesh (open3d BVH distance; sign from libigl's fast winding number, which calls
+self-overlapping parts inside, their union, like the min over parts), and minimises eq. 3:
 
     L = mean (sgn(d~) - sgn(d))^2  +  abs_weight * mean (|d~| - |d|)^2
 
@@ -66,7 +67,8 @@ class TrainConfig:
     residual: str = "signed"        # distance term: 'signed' (d~ - d)^2 or 'abs' (|d~| - |d|)^2 (eq. 3 literally)
     pose_mode: str = "realistic"
     global_orient_scale: float = 0.0  # rad sd of random global orientation (parts are in local frames anyway)
-    gt_rays: int = 5                # ray-voting rays for the ground-truth sign
+    gt_sign: str = "fast_winding"   # ground-truth sign: 'fast_winding' / 'winding' (libigl; self-overlaps inside) or 'raycast'
+    gt_rays: int = 5                # ray-voting rays for gt_sign='raycast'
     micro_batch: int = 2            # bodies per forward/backward; gradients accumulate to the same full-batch step
     encoder_bf16: bool = False      # bfloat16 autocast of the PointNet encoder (CPU speed; see VolumetricSMPLNet)
     seed: int = 0
@@ -105,6 +107,8 @@ class TrainConfig:
             d["model"] = CoapConfig.from_dict(d.get("model", {}))
         elif "model" in d:
             d["model"] = VolumeConfig.from_dict(d["model"])
+        if d.get("gt_sign", "fast_winding") not in ("fast_winding", "winding", "raycast"):
+            raise ValueError(f"gt_sign must be 'fast_winding', 'winding' or 'raycast', got {d['gt_sign']!r}")
         if d.get("residual", "signed") not in ("signed", "abs"):
             raise ValueError(f"residual must be 'signed' or 'abs', got {d['residual']!r}")
         if "surface_sigma" in d:
@@ -158,7 +162,7 @@ def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> d
         bmin, bmax = partition.boxes(out.vertices, G)
         pts = sample_training_queries(out.vertices, body.faces_tensor, G, bmin, bmax, cfg.n_uniform, cfg.n_surface,
                                       sigma=cfg.surface_sigma, face_ids_per_part=partition.tight_face_ids, generator=g)
-        gt = batch_mesh_sdf(out.vertices, body.faces, pts, nsamples=cfg.gt_rays, check_closed=False)
+        gt = batch_mesh_sdf(out.vertices, body.faces, pts, sign=cfg.gt_sign, nsamples=cfg.gt_rays, check_closed=False)
     posed = {"vertices": out.vertices, "joints": out.joints, "full_pose": out.full_pose}
     return {"params": params, "posed": posed, "points": pts, "sdf": gt, "seed": seed}
 

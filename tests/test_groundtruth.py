@@ -126,8 +126,13 @@ def test_brute_reference_on_cube(cube, rng):
 
 
 # ------------------------------------------------------------------ winding numbers
+WINDING = {"igl": gt.winding_number, "igl_fast": lambda v, f, p: gt.winding_number(v, f, p, fast=True),
+           "reference": gt.winding_number_reference}
+
+
+@pytest.mark.parametrize("impl", sorted(WINDING))
 @pytest.mark.parametrize("shape", ["cube", "sphere", "L"])
-def test_winding_number_is_indicator(shape, cube, sphere, rng):
+def test_winding_number_is_indicator(shape, impl, cube, sphere, rng):
     if shape == "L":
         v, f = voxel_mesh(L_CELLS)
         p = rng.uniform(-0.5, 3.5, (1500, 3))
@@ -138,7 +143,7 @@ def test_winding_number_is_indicator(shape, cube, sphere, rng):
         inside = box_sdf(p, 0.5) < 0 if shape == "cube" else None
     keep = off_surface(p, v, f)
     p = p[keep]
-    w = gt.winding_number(v, f, p)
+    w = WINDING[impl](v, f, p)
     if inside is None:  # convex icosphere: inside iff behind every face plane
         tri = v[f]
         n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
@@ -146,20 +151,26 @@ def test_winding_number_is_indicator(shape, cube, sphere, rng):
     else:
         inside = inside[keep]
     assert 0.05 < inside.mean() < 0.8
-    np.testing.assert_allclose(w, inside.astype(float), atol=1e-9)
+    if impl == "igl_fast":  # approximation: right side of 1/2 everywhere, close to the indicator
+        np.testing.assert_array_equal(w > 0.5, inside)
+        np.testing.assert_allclose(w, inside.astype(float), atol=0.02)
+    else:
+        np.testing.assert_allclose(w, inside.astype(float), atol=1e-9)
 
 
-def test_winding_fast_matches_direct(sphere, rng):
+def test_winding_implementations_match_direct(sphere, rng):
     v, f = sphere
     p = rng.normal(0, 0.5, (300, 3))
-    fast = gt.winding_number(v, f, p, chunk=5000)  # several blocks
-    direct = gt._winding_direct(torch.as_tensor(v[f]), torch.as_tensor(p)).numpy()
-    np.testing.assert_allclose(fast, direct, atol=1e-10)
+    direct = gt._winding_direct(torch.as_tensor(v[f]), torch.as_tensor(p)).numpy()  # textbook per-pair sum
+    np.testing.assert_allclose(gt.winding_number_reference(v, f, p, chunk=5000), direct, atol=1e-10)  # several blocks
+    np.testing.assert_allclose(gt.winding_number(v, f, p), direct, atol=1e-10)
+    np.testing.assert_allclose(gt.winding_number(v, f, p, fast=True), direct, atol=0.02)
 
 
-def test_winding_open_mesh_is_fractional(cube):
+@pytest.mark.parametrize("impl", ["igl", "reference"])
+def test_winding_open_mesh_is_fractional(cube, impl):
     v, f = cube
-    w = gt.winding_number(v, f[2:], np.zeros((1, 3)))  # one square side removed: the centre sees 5/6 of the sphere
+    w = WINDING[impl](v, f[2:], np.zeros((1, 3)))  # one square side removed: the centre sees 5/6 of the sphere
     np.testing.assert_allclose(w, [5 / 6], atol=1e-12)
 
 
@@ -173,7 +184,7 @@ def test_winding_torch_in_torch_out(cube):
 
 # ------------------------------------------------------------------ signed distance
 @needs_o3d
-@pytest.mark.parametrize("sign", ["raycast", "winding"])
+@pytest.mark.parametrize("sign", ["raycast", "winding", "fast_winding"])
 def test_cube_sdf_exact(cube, sign, rng):
     p = np.concatenate([rng.uniform(-1.0, 1.0, (1500, 3)), rng.uniform(-0.52, 0.52, (500, 3))])
     d = gt.mesh_sdf(*cube, p, sign=sign)
@@ -233,6 +244,18 @@ def test_batch_matches_single(cube, sphere, rng):
     dw = gt.batch_mesh_sdf(verts, f, p, sign="winding")
     sure = np.abs(dw) > 1e-5
     np.testing.assert_array_equal(np.sign(dw[sure]), np.sign(d.numpy()[sure]))
+
+
+@needs_o3d
+def test_self_overlap_is_inside_for_winding_outside_for_parity(cube, rng):
+    # one "mesh" of two interpenetrating closed cubes (like a hand pushed into the torso): w = 2 in the overlap
+    v, f = cube
+    v2, f2 = np.concatenate([v, v + [0.5, 0.1, 0.1]]), np.concatenate([f, f + len(v)])  # no coplanar faces
+    p = np.stack([rng.uniform(0.05, 0.45, 200), rng.uniform(-0.35, 0.45, 200), rng.uniform(-0.35, 0.45, 200)], 1)
+    np.testing.assert_allclose(gt.winding_number(v2, f2, p), 2.0, atol=1e-9)
+    for sign in ("winding", "fast_winding"):
+        assert (gt.mesh_sdf(v2, f2, p, sign=sign) < 0).all()
+    assert (gt.mesh_sdf(v2, f2, p, sign="raycast") > 0).all()  # parity: an even number of crossings
 
 
 @needs_o3d
