@@ -128,7 +128,7 @@ def test_metrics_hand_computed():
 
 # ---------------------------------------------------------------------------------------------- evaluate
 def _gt_predictor(body):
-    return lambda out, pts: batch_mesh_sdf(out.vertices, body.faces, pts)
+    return lambda out, pts: batch_mesh_sdf(out.vertices, body.faces, pts, sign="winding")
 
 
 def test_ground_truth_predictor_is_perfect(body, tmp_path):
@@ -152,7 +152,7 @@ def test_shifted_and_flipped_predictors(body, tmp_path):
     bodies = ev.validation_bodies(2)
     verts = ev.pose_bodies(body, bodies)
     pts, surf = ev.query_points(verts, body.faces, SMALL["n_points"])
-    d = batch_mesh_sdf(verts.double().numpy(), body.faces, pts.double().numpy())
+    d = batch_mesh_sdf(verts.double().numpy(), body.faces, pts.double().numpy(), sign="winding")
     for name, sel in (("iou_surf", surf.numpy()), ("iou_unif", ~surf.numpy())):
         ref = (d[:, sel] < -0.01).sum(1) / (d[:, sel] < 0).sum(1)
         assert res.per_body[name] == pytest.approx(ref.tolist(), abs=2e-3)
@@ -184,7 +184,7 @@ def test_ground_truth_cache(body, posed, tmp_path, monkeypatch):
     with pytest.raises(AssertionError, match="cache miss"):  # other points: other key
         ev.ground_truth(verts, body.faces, pts + 1e-3, cache_dir=tmp_path)
     with pytest.raises(AssertionError, match="cache miss"):  # other sign mode: other key
-        ev.ground_truth(verts, body.faces, pts, sign="winding", cache_dir=tmp_path)
+        ev.ground_truth(verts, body.faces, pts, sign="raycast", cache_dir=tmp_path)
 
 
 def test_bad_predictor_shape_is_reported(body, tmp_path):
