@@ -37,7 +37,8 @@ DEFAULT_CHECKPOINTS = {"volsmpl": ASSETS / "volsmpl_anny", "coap": ASSETS / "coa
 @dataclass
 class Encoding:
     """Per-forward-output body encoding. G (B, K, 4, 4) part-to-world; box_min/max (B, K, 3) padded
-    boxes in part frames; code: PartCode (z_k and generated decoder weights)."""
+    boxes in part frames; code: PartCode (z_k and generated decoder weights); center (B, K, 3) and
+    scale (B, K, 1) of the part normalisation (config.normalize_parts), else None."""
 
     G: torch.Tensor
     box_min: torch.Tensor
@@ -45,10 +46,19 @@ class Encoding:
     code: PartCode
     stamp: tuple
     ref: tuple | None = None  # detached (vertices, joints, full_pose) of a constant output, for value reuse
+    center: torch.Tensor | None = None
+    scale: torch.Tensor | None = None
 
 
 def _stamp(out) -> tuple:
     return tuple((t.data_ptr(), t._version, tuple(t.shape), t.dtype, t.device) for t in (out.vertices, out.joints, out.full_pose))
+
+
+def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Similarity that maps each padded part box into [-1, 1]^3 along its longest side: centre (B, K, 3) and
+    isotropic scale (B, K, 1) = half the longest side. Decoders of normalised models read (x_k - c) / s and
+    their output times s is metres: distances scale with the similarity, so the SDF stays an SDF."""
+    return 0.5 * (box_min + box_max), 0.5 * (box_max - box_min).amax(dim=-1, keepdim=True)
 
 
 class Volume(torch.nn.Module):
@@ -119,7 +129,12 @@ class Volume(torch.nn.Module):
         G = p.part_transforms(out.full_pose, out.joints)
         box_min, box_max = p.boxes(v, G)
         local = p.to_part_frames(p.surface_points(v, generator), G)  # (B, K, n, 3)
-        return Encoding(G=G, box_min=box_min, box_max=box_max, code=self.net.encode(local), stamp=_stamp(out))
+        center = scale = None
+        if getattr(self.net.config, "normalize_parts", False):
+            center, scale = part_normalization(box_min, box_max)
+            local = (local - center[:, :, None]) / scale[:, :, None]
+        return Encoding(G=G, box_min=box_min, box_max=box_max, code=self.net.encode(local), stamp=_stamp(out),
+                        center=center, scale=scale)
 
     # ------------------------------------------------------------------ evaluation core
     @property
@@ -147,13 +162,23 @@ class Volume(torch.nn.Module):
             outside = box_sdf(x_local, enc.box_min[:, :, None], enc.box_max[:, :, None])
         else:
             outside = x_local.new_zeros(x_local.shape[:3])
+        norm = enc.scale is not None
         if dense:
             self.decoder_evaluations += x_local.shape[0] * x_local.shape[1] * x_local.shape[2]
             extra = {} if self.is_sdf else {"inside": inside}
-            return torch.where(inside, self.net.decode_dense(x_local, enc.code, **extra), outside), inside
+            if norm:
+                c, sc = enc.center[:, :, None], enc.scale[:, :, None]
+                vals = self.net.decode_dense((x_local - c) / sc, enc.code, **extra) * sc[..., 0]
+            else:
+                vals = self.net.decode_dense(x_local, enc.code, **extra)
+            return torch.where(inside, vals, outside), inside
         b, k, n = inside.nonzero(as_tuple=True)
         self.decoder_evaluations += b.numel()
-        vals = self.net.decode_pairs(x_local[b, k, n], b, k, enc.code)
+        if norm:
+            sc = enc.scale[b, k]
+            vals = self.net.decode_pairs((x_local[b, k, n] - enc.center[b, k]) / sc, b, k, enc.code) * sc[:, 0]
+        else:
+            vals = self.net.decode_pairs(x_local[b, k, n], b, k, enc.code)
         return outside.index_put((b, k, n), vals), inside
 
     def _chunks(self, B: int, N: int):

@@ -312,3 +312,75 @@ def test_million_points_memory_bounded():
     chunked, whole = run(1 << 21), run(1 << 40)
     assert chunked < 400, chunked          # MB above the pre-query peak
     assert whole > 2 * chunked + 100, (whole, chunked)  # the bound comes from chunking
+
+
+# ------------------------------------------------------------------ normalised part coordinates
+@pytest.fixture(scope="module")
+def nbody(tiny_config):
+    import dataclasses
+    b = volsmpl.create_body()
+    torch.manual_seed(0)
+    volsmpl.attach_volume(b, pretrained=False, config=dataclasses.replace(tiny_config, normalize_parts=True))
+    return b
+
+
+def test_part_normalization_maps_boxes_into_unit_cube():
+    from volsmpl.volume import part_normalization
+    lo = torch.tensor([[[-0.1, 0.0, 0.2], [1.0, 1.0, 1.0]]])
+    hi = torch.tensor([[[0.3, 0.1, 0.3], [1.2, 1.6, 1.1]]])
+    c, s = part_normalization(lo, hi)
+    assert c.shape == (1, 2, 3) and s.shape == (1, 2, 1)
+    for x in (lo, hi):
+        u = (x - c) / s
+        assert u.abs().amax() <= 1 + 1e-6
+        assert torch.allclose(u.abs().amax(dim=-1), torch.ones(1, 2))  # the longest side spans [-1, 1]
+
+
+def test_normalized_model_matches_its_formula(nbody):
+    # reference: s_k * f_k((x_k - c_k) / s_k) inside part k's box, the box SDF outside, min over parts
+    from volsmpl.nn.analytic import box_sdf
+    from volsmpl.partition import Partition
+    vol = nbody.volume
+    out = nbody(**random_pose(2, seed=7))
+    pts = _near_points(out, 200, seed=7)
+    enc = vol.encode(out)
+    x = Partition.canonicalize(pts, enc.G)                                     # (B, K, N, 3)
+    lo, hi = enc.box_min[:, :, None], enc.box_max[:, :, None]
+    c, s = 0.5 * (lo + hi), 0.5 * (hi - lo).amax(-1, keepdim=True)
+    inside = ((x >= lo) & (x <= hi)).all(-1)
+    f = vol.net.decode_dense((x - c) / s, enc.code) * s[..., 0]
+    ref = torch.where(inside, f, box_sdf(x, lo, hi))
+    assert inside.any() and (~inside).any()
+    assert torch.allclose(vol.query_parts(out, pts), ref, atol=1e-5)
+    assert torch.allclose(vol.query_parts(out, pts, dense=True), ref, atol=1e-5)
+
+
+def test_normalized_model_rigid_motion_and_sparse_dense(nbody):
+    p = random_pose(1, seed=8)
+    p["global_orient"], p["transl"] = torch.zeros(1, 3), torch.zeros(1, 3)
+    out1 = nbody(**p)
+    rot, t = torch.tensor([[0.3, -1.1, 0.4]]), torch.tensor([[0.5, -0.2, 1.0]])
+    out2 = nbody(**{**p, "global_orient": rot, "transl": t})
+    R = volsmpl.body.lbs.rodrigues(rot)[0]
+    j0 = out1.joints[0, 0]
+    pts = _near_points(out1, 300, seed=8)
+    moved = (pts - j0) @ R.T + j0 + t
+    a = nbody.volume.query(out1, pts)
+    assert torch.allclose(a, nbody.volume.query(out2, moved), atol=1e-4)
+    assert torch.allclose(a, nbody.volume.query(out1, pts, dense=True), atol=1e-5)
+
+
+def test_normalized_model_gradients_match_finite_differences(tiny_config):
+    import dataclasses
+    b = volsmpl.create_body().to(torch.float64)
+    torch.manual_seed(0)
+    vol = volsmpl.attach_volume(b, pretrained=False, config=dataclasses.replace(tiny_config, normalize_parts=True))
+    vol = vol.to(torch.float64)
+    p = random_pose(1, seed=9, dtype=torch.float64)
+    pts = _near_points(b(**p), 40, seed=9)
+
+    def f(body_pose, betas, x):
+        return vol.query(b(betas=betas, global_orient=p["global_orient"], body_pose=body_pose, transl=p["transl"]), x)
+
+    args = (p["body_pose"].clone().requires_grad_(), p["betas"].clone().requires_grad_(), pts.clone().requires_grad_())
+    assert torch.autograd.gradcheck(lambda *a: f(*a)[:, :8], args, eps=1e-6, atol=1e-5, rtol=1e-3)
