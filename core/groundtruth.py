@@ -138,6 +138,15 @@ def winding_number(vertices, faces, points, fast: bool = False):
     Returns:
         (N,) or (...) winding numbers: torch on the points' device/dtype for torch points, else numpy float64.
     """
+    def igl_winding(v, f, p):
+        igl = _igl()
+        return np.asarray((igl.fast_winding_number if fast else igl.winding_number)(v, f, p), dtype=np.float64)
+    return _per_point(igl_winding, vertices, faces, points)
+
+
+def _per_point(fn, vertices, faces, points):
+    """Validate a mesh and points (numpy or torch), call fn(v (V, 3) f64, f (F, 3) i64, p (N, 3) f64) -> (N,) for
+    N > 0, reshape to the points' leading shape; torch out for torch points (their device/dtype)."""
     v = _to_numpy(vertices, "vertices", np.float64)
     f = _to_numpy(faces, "faces", np.int64)
     p = _to_numpy(points, "points", np.float64)
@@ -145,11 +154,8 @@ def winding_number(vertices, faces, points, fast: bool = False):
     _check_points(p)
     lead = p.shape[:-1]
     p = p.reshape(-1, 3)
-    out = np.zeros(len(p), dtype=np.float64)
-    if len(p):
-        igl = _igl()
-        out = (igl.fast_winding_number if fast else igl.winding_number)(v, f, p)
-    out = np.asarray(out, dtype=np.float64).reshape(lead)
+    out = fn(v, f, p) if len(p) else np.zeros(0, dtype=np.float64)
+    out = out.reshape(lead)
     return _wrap_like(out, points) if torch.is_tensor(points) else out
 
 
@@ -173,22 +179,15 @@ def winding_number_reference(vertices, faces, points, chunk: int = 1 << 21):
     Returns:
         (N,) or (...) winding numbers: torch on the points' device/dtype for torch points, else numpy float64.
     """
-    v = _to_numpy(vertices, "vertices", np.float64)
-    f = _to_numpy(faces, "faces", np.int64)
-    p = _to_numpy(points, "points", np.float64)
-    _check_mesh(v, f)
-    _check_points(p)
-    lead = p.shape[:-1]
-    p = p.reshape(-1, 3)
-    out = np.zeros(len(p), dtype=np.float64)
-    if len(p):
+    def reference(v, f, p):
+        out = np.zeros(len(p), dtype=np.float64)
         mesh = _winding_tables(v, f)
         step = max(1, int(chunk) // len(f))
         pt = torch.from_numpy(p) - mesh["center"]
         for s in range(0, len(p), step):
             out[s:s + step] = _winding_block(mesh, pt[s:s + step]).numpy()
-    out = out.reshape(lead)
-    return _wrap_like(out, points) if torch.is_tensor(points) else out
+        return out
+    return _per_point(reference, vertices, faces, points)
 
 
 def _winding_tables(v: np.ndarray, f: np.ndarray) -> dict:
