@@ -6,6 +6,8 @@ import json
 import pytest
 
 from volsmpl.bench import BenchConfig, PAPER, _estimate_call_s, _fit_budget, compute_ratios
+import volsmpl
+import volsmpl.volume
 from volsmpl.cli import main
 
 
@@ -37,7 +39,8 @@ def test_json_has_expected_keys(tiny_run):
                     "decoder_pairs", "flops_per_pair", "evals_per_point", "decoder_gflop", "gflops"):
             assert r[key] is not None, (name, key)
         assert r["batch"] == 1 and r["points"] == 2000 and len(r["t_ms_all"]) == 1
-        assert r["weights"] == "random init"
+        shipped = volsmpl.volume.DEFAULT_CHECKPOINTS["volsmpl"].with_suffix(".safetensors").exists()
+        assert r["weights"] == ("trained" if shipped else "random init")
     assert res["accuracy"]["volsmpl"]["status"].startswith("skipped")
 
 

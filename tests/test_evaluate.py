@@ -226,3 +226,12 @@ def test_cli_end_to_end(body, tiny_config, tmp_path, capsys):
     assert r["points"] == 2000 and r["t_ms"] > 0 and r["t_query_ms"] > 0 and len(r["t_ms_all"]) == 2
     assert r["mem_kind"] == "cpu peak RSS increase" and r["mem_bytes"] >= 0
     assert main(["eval", "--checkpoint", str(tmp_path / "missing"), "--n-bodies", "1"]) == 2
+
+
+@pytest.mark.needs_checkpoint
+def test_shipped_checkpoint_accuracy(tmp_path):
+    # regression guard of the shipped asset on the first 4 validation bodies (exact winding-number ground truth);
+    # the bar sits a few points under the full 64-body figure in the README
+    res = ev.evaluate_checkpoint(None, n_bodies=4, n_points=8000, cache_dir=str(tmp_path))
+    assert res.metrics["iou_mean"] > 0.70, res.metrics
+    assert res.metrics["mse_sdf_surf"] < 1e-4, res.metrics

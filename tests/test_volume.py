@@ -186,8 +186,10 @@ def test_chunking_bounded(vbody):
         vol.chunk_elems = old
 
 
-def test_attach_without_checkpoint_explains():
+def test_attach_without_checkpoint_explains(monkeypatch, tmp_path):
+    import volsmpl.volume as vm
     b = volsmpl.create_body()
+    monkeypatch.setitem(vm.DEFAULT_CHECKPOINTS, "volsmpl", tmp_path / "none")  # as if no checkpoint shipped
     with pytest.raises(FileNotFoundError, match="volsmpl train"):
         volsmpl.attach_volume(b)
     with pytest.raises(ValueError, match="unknown model"):
