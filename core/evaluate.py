@@ -81,6 +81,8 @@ from typing import Callable, Dict, List, Optional
 import numpy as np
 import torch
 
+from .groundtruth import SIGN_MODES
+
 #: seed of the validation set (PosePrior's 316 validation bodies in the paper). Training uses other seeds
 #: and 'realistic' poses; do not train on bodies from this seed.
 VAL_SEED = 316
@@ -711,7 +713,7 @@ def add_parser(sub):
     p.add_argument("--repeats", type=int, default=d.timing_repeats, help="timed runs (median reported)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice); "
                    "1 gives stable CPU timings on a busy machine")
-    p.add_argument("--gt-sign", default=d.gt_sign, choices=["winding", "fast_winding", "raycast"],
+    p.add_argument("--gt-sign", default=d.gt_sign, choices=SIGN_MODES,
                    help="ground-truth sign: the generalised winding number through libigl (exact, or its fast approximation; "
                         "self-overlaps of a posed mesh are inside) or ray parity (calls them outside); cached")
     p.add_argument("--cache-dir", default=None, help=f"ground-truth cache (default {default_cache_dir()})")

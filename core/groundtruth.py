@@ -26,7 +26,7 @@ import torch
 #: default near-surface noise (metres): half of the near-surface queries get 1 cm, half 5 cm (see sampler docstring)
 DEFAULT_SURFACE_SIGMA = (0.01, 0.05)
 
-_SIGN_MODES = ("raycast", "winding", "fast_winding")
+SIGN_MODES = ("raycast", "winding", "fast_winding")
 
 
 # ---------------------------------------------------------------------------------------------- helpers
@@ -264,8 +264,8 @@ def _scene_sdf(scene, v: np.ndarray, f: np.ndarray, p: np.ndarray, sign: str, ns
 
 
 def _validate_sign(sign: str, nsamples: int) -> None:
-    if sign not in _SIGN_MODES:
-        raise ValueError(f"sign='{sign}' is unknown; use one of {_SIGN_MODES}.")
+    if sign not in SIGN_MODES:
+        raise ValueError(f"sign='{sign}' is unknown; use one of {SIGN_MODES}.")
     if nsamples < 1 or nsamples % 2 == 0:
         raise ValueError(f"nsamples={nsamples}: the ray-parity vote needs an odd number of rays >= 1 (e.g. 5).")
 

@@ -46,7 +46,7 @@ from .body.model import create_body
 from .body.poses import sample_poses
 from .body.shapes import sample_betas
 from .checkpoint import load_checkpoint, save_checkpoint
-from .groundtruth import batch_mesh_sdf, sample_training_queries
+from .groundtruth import SIGN_MODES, batch_mesh_sdf, sample_training_queries
 from .nn.config import VolumeConfig
 from .volume import attach_volume
 
@@ -107,8 +107,8 @@ class TrainConfig:
             d["model"] = CoapConfig.from_dict(d.get("model", {}))
         elif "model" in d:
             d["model"] = VolumeConfig.from_dict(d["model"])
-        if d.get("gt_sign", "fast_winding") not in ("fast_winding", "winding", "raycast"):
-            raise ValueError(f"gt_sign must be 'fast_winding', 'winding' or 'raycast', got {d['gt_sign']!r}")
+        if d.get("gt_sign", "fast_winding") not in SIGN_MODES:
+            raise ValueError(f"gt_sign must be one of {SIGN_MODES}, got {d['gt_sign']!r}")
         if d.get("residual", "signed") not in ("signed", "abs"):
             raise ValueError(f"residual must be 'signed' or 'abs', got {d['residual']!r}")
         if "surface_sigma" in d:
