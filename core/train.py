@@ -80,6 +80,10 @@ class TrainConfig:
     model: object = field(default_factory=VolumeConfig)  # VolumeConfig, or CoapConfig for model_kind 'coap'
 
     def __post_init__(self):
+        if self.gt_sign not in SIGN_MODES:
+            raise ValueError(f"gt_sign must be one of {SIGN_MODES}, got {self.gt_sign!r}")
+        if self.residual not in ("signed", "abs"):
+            raise ValueError(f"residual must be 'signed' or 'abs', got {self.residual!r}")
         if self.model_kind == "coap" and isinstance(self.model, VolumeConfig):
             if self.model != VolumeConfig():
                 raise ValueError("model_kind='coap' needs a CoapConfig as model, got a VolumeConfig.")
@@ -107,10 +111,6 @@ class TrainConfig:
             d["model"] = CoapConfig.from_dict(d.get("model", {}))
         elif "model" in d:
             d["model"] = VolumeConfig.from_dict(d["model"])
-        if d.get("gt_sign", "fast_winding") not in SIGN_MODES:
-            raise ValueError(f"gt_sign must be one of {SIGN_MODES}, got {d['gt_sign']!r}")
-        if d.get("residual", "signed") not in ("signed", "abs"):
-            raise ValueError(f"residual must be 'signed' or 'abs', got {d['residual']!r}")
         if "surface_sigma" in d:
             d["surface_sigma"] = tuple(d["surface_sigma"])
         return cls(**d)

@@ -176,3 +176,10 @@ def test_init_from_model_checkpoint(tmp_path):
     assert r["step"] == 3
     with pytest.raises(ValueError, match="holds model config"):
         train(tiny_cfg(model=VolumeConfig()), tmp_path / "d", init=tmp_path / "a" / "ckpt-00000002" / "model", quiet=True)
+
+
+def test_bad_loss_and_sign_options_fail_at_construction():
+    with pytest.raises(ValueError, match="residual"):
+        TrainConfig(residual="l1")
+    with pytest.raises(ValueError, match="gt_sign"):
+        TrainConfig(gt_sign="parity")
