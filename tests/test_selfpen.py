@@ -149,17 +149,19 @@ def test_cli_without_checkpoint_stops_with_attach_volume_message(tmp_path, capsy
 
 
 class _StubVolume(torch.nn.Module):
-    """selfpen_loss = sum of the left wrist's height; 'penetration points' for the first k calls."""
+    """selfpen_loss = sum of the left wrist's height; 'penetration points' for the first k calls
+    (or, with `pattern`, call i finds pattern[i] points, 0 after the pattern ends)."""
 
-    def __init__(self, k: int):
+    def __init__(self, k: int = 0, pattern=None):
         super().__init__()
         self.w = torch.nn.Parameter(torch.ones(1))
-        self.k, self.calls = k, 0
+        self.pattern = pattern if pattern is not None else [5] * k
+        self.calls = 0
 
     def selfpen_loss(self, out, n_points=300, generator=None, return_points=False):
+        n = self.pattern[self.calls] if self.calls < len(self.pattern) else 0
         self.calls += 1
-        pts = torch.zeros(5 if self.calls <= self.k else 0, 3)
-        return out.joints[:, 20, 1] * self.w, [pts]
+        return out.joints[:, 20, 1] * self.w, [torch.zeros(n, 3)]
 
 
 def test_repair_loop_stops_when_no_points_remain(body):
@@ -174,6 +176,23 @@ def test_repair_loop_stops_when_no_points_remain(body):
         assert wrist(r.body_pose) < wrist(case.body_pose) - 1e-3  # moved down the loss gradient
     r2 = repair_case(body, _StubVolume(k=100), case, SelfPenConfig(lr=0.05, max_iters=4))
     assert r2.status == "max_iters" and r2.iterations == 4
+
+
+def test_repair_stop_checks_redraw_before_stopping(body):
+    case = C.load_cases(names=["hands_through_thighs"])[0]
+    # one empty draw stops the paper's loop at once ...
+    r = repair_case(body, _StubVolume(pattern=[5, 0, 7]), case, SelfPenConfig(lr=0.5, w_prior=1.0))
+    assert r.status == "resolved" and r.iterations == 1 and r.points == [5, 0]
+    # ... with stop_checks=2 the second draw finds points again and the next step uses it; two empty draws stop
+    vol = _StubVolume(pattern=[5, 0, 7, 0, 0])
+    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_prior=1.0, stop_checks=2))
+    assert r.status == "resolved" and r.iterations == 2 and r.points == [5, 0, 7, 0, 0] and vol.calls == 5
+    assert len(r.step_ms) == 2
+    # all draws empty at the start: nothing to repair for the volume
+    r = repair_case(body, _StubVolume(pattern=[]), case, SelfPenConfig(stop_checks=3))
+    assert r.status == "no_volume_points" and r.iterations == 0 and r.points == [0, 0, 0]
+    with pytest.raises(ValueError, match="stop_checks must be >= 1"):
+        SelfPenConfig(stop_checks=0)
 
 
 def test_repair_random_volume_and_tpose_unchanged(body, tiny_config):

@@ -40,6 +40,8 @@ def add_parser(sub):
     p.add_argument("--w-selfpen", type=float, default=d.w_selfpen, help=f"self-penetration weight (paper {d.w_selfpen:g})")
     p.add_argument("--w-prior", type=float, default=d.w_prior, help=f"pose prior weight (paper {d.w_prior:g})")
     p.add_argument("--n-points", type=int, default=d.n_points, help=f"samples per box of a colliding pair (paper {d.n_points})")
+    p.add_argument("--stop-checks", type=int, default=d.stop_checks,
+                   help=f"stop when so many point draws in a row find no penetration (paper {d.stop_checks})")
     p.add_argument("--seed", type=int, default=d.seed, help="seed of the point sampler")
     p.add_argument("--device", default=d.device, choices=["cpu", "cuda"])
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
@@ -93,7 +95,7 @@ def run(args) -> int:
     models = parse_models(args.model)
     ckpts = _checkpoints(args, models)
     cfg = SelfPenConfig(lr=args.lr, max_iters=args.max_iters, w_selfpen=args.w_selfpen, w_prior=args.w_prior,
-                        n_points=args.n_points, seed=args.seed, device=args.device)
+                        n_points=args.n_points, stop_checks=args.stop_checks, seed=args.seed, device=args.device)
     if cfg.device == "cuda" and not torch.cuda.is_available():
         raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
     if args.threads:

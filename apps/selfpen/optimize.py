@@ -6,7 +6,9 @@ For one body (betas, global_orient, body_pose theta_0) minimise over the body po
     L(theta) = w_selfpen * selfpen_loss(body(theta)) + w_prior * ||theta - theta_0||^2
 
 with SGD, at most `max_iters` steps, stopping as soon as the self-penetration loss samples no
-point inside two colliding parts (the list of points returned by `Volume.selfpen_loss` is empty).
+point inside two colliding parts (the list of points returned by `Volume.selfpen_loss` is empty)
+in `stop_checks` independent draws in a row (the paper stops on the first empty draw: 1; a draw
+that finds points again is the one the next step uses, so re-checks never cost a step).
 Defaults are the paper's (COAP's) hyper-parameters. The repair is measured with the exact
 triangle-collision metric (`triangles.body_collisions`) before and after, and by the geodesic
 change of each joint's rotation.
@@ -42,6 +44,7 @@ class SelfPenConfig:
     w_selfpen: float = 0.1
     w_prior: float = 1e3
     n_points: int = 300
+    stop_checks: int = 1  # empty draws in a row that stop the loop (paper: 1)
     seed: int = 0  # seeds the point sampler of every case
     device: str = "cpu"
 
@@ -54,6 +57,8 @@ class SelfPenConfig:
             raise ValueError(f"loss weights must be >= 0, got w_selfpen={self.w_selfpen}, w_prior={self.w_prior}")
         if self.n_points < 1:
             raise ValueError(f"n_points must be >= 1, got {self.n_points}")
+        if self.stop_checks < 1:
+            raise ValueError(f"stop_checks must be >= 1 (draws that must all be empty to stop), got {self.stop_checks}")
 
 
 @dataclass
@@ -192,8 +197,11 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
             for it in range(cfg.max_iters + 1):
                 t0 = time.perf_counter()
                 out = body(betas=betas, global_orient=orient, body_pose=theta)
-                sp, pts = volume.selfpen_loss(out, n_points=cfg.n_points, generator=gen, return_points=True)
-                res.points.append(int(pts[0].shape[0]))
+                for _ in range(cfg.stop_checks):  # re-draw while empty, up to stop_checks draws
+                    sp, pts = volume.selfpen_loss(out, n_points=cfg.n_points, generator=gen, return_points=True)
+                    res.points.append(int(pts[0].shape[0]))
+                    if pts[0].shape[0] > 0:
+                        break
                 if pts[0].shape[0] == 0:
                     res.status = "no_volume_points" if it == 0 else "resolved"
                     break
