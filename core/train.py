@@ -274,6 +274,16 @@ def _dist_info():
     return 0, 1
 
 
+def _truncate_log(path: Path, step: int) -> None:
+    """Drop log rows after `step` (the step a resumed run restarts from), atomically."""
+    lines = path.read_text().splitlines(keepends=True)
+    keep = lines[:1] + [ln for ln in lines[1:] if ln.split(",", 1)[0].isdigit() and int(ln.split(",", 1)[0]) <= step]
+    if len(keep) != len(lines):
+        tmp = path.with_suffix(".csv.tmp")
+        tmp.write_text("".join(keep))
+        os.replace(tmp, path)
+
+
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps: int | None = None,
           device: str = "cpu", quiet: bool = False, init: str | Path | None = None,
           max_seconds: float | None = None) -> dict:
@@ -330,6 +340,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         out_dir.mkdir(parents=True, exist_ok=True)
         (out_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=1))
     log_path = out_dir / "log.csv"
+    if rank == 0 and log_path.exists():
+        _truncate_log(log_path, start)  # rows past the checkpoint were logged by a run that stopped before saving
     new_log = rank == 0 and not log_path.exists()
     logf = open(log_path, "a", newline="") if rank == 0 else None
     writer = csv.writer(logf) if logf else None

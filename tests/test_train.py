@@ -139,6 +139,17 @@ def test_resume_continues_exactly(tmp_path):
     assert vol.meta["training"]["step"] == 4
 
 
+def test_resume_drops_log_rows_past_the_checkpoint(tmp_path):
+    cfg = dataclasses.replace(tiny_cfg(), log_every=1, ckpt_every=2)
+    train(cfg, tmp_path / "a", max_steps=2, quiet=True)
+    log = tmp_path / "a" / "log.csv"
+    # a run that logged steps 3 and 4 and died before its next checkpoint
+    log.write_text(log.read_text() + "3,1,1,0,1e-4,1,0\n4,1,1,0,1e-4,1,0\n")
+    train(cfg, tmp_path / "a", resume=True, max_steps=2, quiet=True)
+    steps = [int(ln.split(",")[0]) for ln in log.read_text().splitlines()[1:]]
+    assert steps == [1, 2, 3, 4]
+
+
 def test_time_budget_is_cumulative_over_resumes(tmp_path):
     cfg = dataclasses.replace(tiny_cfg(), ckpt_every=1000)
     r1 = train(cfg, tmp_path / "a", max_seconds=1e-9, quiet=True)  # any step spends the budget
