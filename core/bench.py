@@ -527,25 +527,16 @@ def evaluate_protocol_check(cfg: BenchConfig, checkpoint: Optional[str]) -> dict
 
 def accuracy(model: str, checkpoint: Optional[str], cfg: BenchConfig) -> dict:
     """IoU/MSE of a trained base model on the validation set; {'status': 'untrained'} without a checkpoint."""
-    from .evaluate import EvalConfig, evaluate, evaluate_checkpoint
+    from .checkpoint import checkpoint_model
+    from .evaluate import EvalConfig, evaluate_checkpoint
 
     if checkpoint is None:
         return {"status": "untrained"}
     ecfg = EvalConfig(n_bodies=cfg.n_bodies, n_points=cfg.n_points, device=cfg.device)
-    if model == "volsmpl":
-        res = evaluate_checkpoint(checkpoint, config=ecfg)
-    else:
-        from .body.model import create_body
-        from .volume import attach_volume
-
-        body = create_body()
-        vol = attach_volume(body, model=model, checkpoint=checkpoint).to(torch.device(cfg.device))
-        occupancy = not vol.is_sdf
-        # occupancy networks: level - occupancy is negative inside (IoU exact; the MSE columns are then meaningless)
-        res = evaluate(lambda out, pts: vol.level - vol.query(out, pts) if occupancy else vol.query(out, pts),
-                       body=body, config=ecfg, name=model)
-        if occupancy:
-            res.metrics = {k: (v if k.startswith("iou") else None) for k, v in res.metrics.items()}
+    held = checkpoint_model(checkpoint)
+    if held != model:
+        raise ValueError(f"{checkpoint} holds a {held} model, not {model}; pass it as --checkpoint-{held}")
+    res = evaluate_checkpoint(checkpoint, config=ecfg)  # occupancy models: IoU only (MSE None)
     return {"status": "trained", "checkpoint": checkpoint, "metrics": res.metrics, "n_bodies": cfg.n_bodies,
             "validation_digest": res.validation_digest}
 

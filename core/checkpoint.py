@@ -89,9 +89,15 @@ def save_checkpoint(path: str | os.PathLike, state_dict: Dict[str, torch.Tensor]
     return st_path, js_path
 
 
+def checkpoint_model(path: str | os.PathLike) -> str:
+    """Which model a checkpoint holds ('volsmpl' or 'coap'), read from its JSON (weights not loaded)."""
+    _, cfg, _ = load_checkpoint(path, weights=False)
+    return "coap" if cfg.get("model") == "coap" else "volsmpl"
+
+
 def load_checkpoint(path: str | os.PathLike, expected_fingerprint: Optional[str] = None,
-                    map_location: str | torch.device = "cpu"
-                    ) -> Tuple[Dict[str, torch.Tensor], Dict[str, Any], Dict[str, Any]]:
+                    map_location: str | torch.device = "cpu", weights: bool = True
+                    ) -> Tuple[Optional[Dict[str, torch.Tensor]], Dict[str, Any], Dict[str, Any]]:
     """Read a checkpoint written by :func:`save_checkpoint`.
 
     Args:
@@ -99,6 +105,7 @@ def load_checkpoint(path: str | os.PathLike, expected_fingerprint: Optional[str]
         expected_fingerprint: if given, the fingerprint of the body the caller uses; the
             checkpoint must have been trained for it.
         map_location: device of the returned tensors.
+        weights: False reads only the JSON (state_dict None; both files must still exist).
     Returns:
         (state_dict, config, meta).
     Raises:
@@ -139,6 +146,8 @@ def load_checkpoint(path: str | os.PathLike, expected_fingerprint: Optional[str]
             raise CheckpointError(f"checkpoint was trained for body {fp}, this body is {expected_fingerprint}; "
                                   "train one with `volsmpl train ...` or pass the matching body.")
 
+    if not weights:
+        return None, config, meta
     try:
         state_dict = load_file(st_path, device=str(map_location))
     except (SafetensorError, OSError, ValueError, RuntimeError) as e:

@@ -461,7 +461,14 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
     which needs `resource_spec` (how the subprocess rebuilds the volume: see measure_resources)."""
     cfg = dataclasses.replace(config or EvalConfig(), **overrides)
     volume = volume.to(torch.device(cfg.device))
-    res = evaluate(lambda out, pts: volume.query(out, pts), body=body, config=cfg, name=name)
+    if volume.is_sdf:
+        res = evaluate(lambda out, pts: volume.query(out, pts), body=body, config=cfg, name=name)
+    else:  # occupancy (COAP): level - occupancy is negative inside, so the IoU columns are exact
+        res = evaluate(lambda out, pts: volume.level - volume.query(out, pts), body=body, config=cfg, name=name)
+        for k in [k for k in res.metrics if k.startswith("mse")]:  # not distances: no SDF error to report
+            res.metrics[k] = None
+            res.per_body[k] = [None] * len(res.per_body[k])
+        res.extra["output"] = "occupancy"
     if cfg.timing:
         if resource_spec is None:
             raise ValueError("timing=True needs resource_spec={'checkpoint': PATH} or {'config': dict, 'init_seed': int} "
@@ -472,12 +479,14 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
 
 def evaluate_checkpoint(path: str | os.PathLike | None, config: Optional[EvalConfig] = None, body=None,
                         random_init: Optional[dict] = None, **overrides) -> EvalResult:
-    """Evaluate a checkpoint (None: the shipped one) with the default body (or `body`).
+    """Evaluate a checkpoint (None: the shipped VolumetricSMPL one) with the default body (or `body`).
+    The checkpoint says which model it holds (VolumetricSMPL or COAP); occupancy models get IoU only.
 
     random_init: instead of a checkpoint, {'config': VolumeConfig dict, 'init_seed': int} for a randomly
     initialised volume (benchmarks before training). Other arguments as `evaluate`.
     """
     from .body.model import create_body
+    from .checkpoint import checkpoint_model
     from .nn.config import VolumeConfig
     from .volume import attach_volume
 
@@ -488,8 +497,9 @@ def evaluate_checkpoint(path: str | os.PathLike | None, config: Optional[EvalCon
         spec = {"config": vol.net.config.to_dict(), "init_seed": int(random_init.get("init_seed", 0))}
         name = "random init"
     else:
-        vol = attach_volume(body, checkpoint=path)
-        spec = {"checkpoint": None if path is None else os.fspath(path)}
+        kind = "volsmpl" if path is None else checkpoint_model(path)
+        vol = attach_volume(body, checkpoint=path, model=kind)
+        spec = {"checkpoint": None if path is None else os.fspath(path), "model": kind}
         name = "ours" if path is None else Path(os.fspath(path)).name
     spec["body_model"] = getattr(body, "model_path", None)
     res = evaluate_volume(vol, body, config=config, name=name, resource_spec=spec, **overrides)
@@ -597,7 +607,7 @@ def _resource_worker(job_json: str) -> None:
         torch.manual_seed(int(spec.get("init_seed", 0)))
         vol = attach_volume(body, pretrained=False, config=VolumeConfig.from_dict(spec["config"]))
     else:
-        vol = attach_volume(body, checkpoint=spec.get("checkpoint"))
+        vol = attach_volume(body, checkpoint=spec.get("checkpoint"), model=spec.get("model", "volsmpl"))
     body, vol = body.to(device), vol.to(device)
     data = torch.load(job["inputs"])
     with torch.no_grad():

@@ -170,6 +170,47 @@ def test_random_model_scores_low(body, tiny_config, tmp_path):
     assert res.metrics["mse_sdf"] > 1e-5
 
 
+class _OccupancyFromTruth(torch.nn.Module):
+    """An occupancy 'volume' (COAP's interface) whose occupancy is the exact inside test, sharpened."""
+
+    is_sdf, level = False, 0.5
+
+    def __init__(self, body):
+        super().__init__()
+        self.gt = _gt_predictor(body)
+
+    def query(self, out, pts):
+        return torch.sigmoid(-torch.as_tensor(self.gt(out, pts)).float() / 1e-4)
+
+
+def test_occupancy_model_gets_iou_only(body, tmp_path):
+    res = ev.evaluate_volume(_OccupancyFromTruth(body), body, cache_dir=str(tmp_path), **SMALL)
+    assert res.metrics["iou_surf"] == 1.0 and res.metrics["iou_unif"] == 1.0
+    assert all(v is None for k, v in res.metrics.items() if k.startswith("mse")), res.metrics
+    assert res.per_body["mse_sdf"] == [None, None] and res.extra["output"] == "occupancy"
+    assert "-" in ev.format_table(res).splitlines()[2]
+    json.dumps(res.to_dict())
+
+
+def test_cli_evaluates_a_coap_checkpoint(tmp_path, capsys):
+    from volsmpl.cli import main
+    from volsmpl.nn.coap_net import CoapConfig
+
+    torch.manual_seed(0)
+    cfg = CoapConfig(latent_dim=8, encoder_hidden=8, encoder_blocks=1, n_surface_samples=32, query_dims=(16,),
+                     query_skip=(), query_out=8, decoder_dims=(16, 16), decoder_skip=())
+    vol = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, model="coap", config=cfg)
+    path = tmp_path / "coap"
+    save_checkpoint(path, vol.net.state_dict(), vol.net.config.to_dict(), {"body_fingerprint": vol.fingerprint})
+    out_json = tmp_path / "res.json"
+    rc = main(["eval", "--checkpoint", str(path), "--n-bodies", "1", "--points", "1000", "--out", str(out_json),
+               "--cache-dir", str(tmp_path / "cache"), "--timing", "--repeats", "1", "--threads", "1"])
+    assert rc == 0, capsys.readouterr().err
+    res = json.loads(out_json.read_text())
+    assert 0.0 <= res["metrics"]["iou_mean"] <= 1.0 and res["metrics"]["mse_sdf"] is None
+    assert res["extra"]["checkpoint"] == str(path) and res["resources"]["t_ms"] > 0
+
+
 def test_ground_truth_cache(body, posed, tmp_path, monkeypatch):
     _, verts = posed
     pts, _ = ev.query_points(verts, body.faces, 1000)
@@ -235,3 +276,13 @@ def test_shipped_checkpoint_accuracy(tmp_path):
     res = ev.evaluate_checkpoint(None, n_bodies=4, n_points=8000, cache_dir=str(tmp_path))
     assert res.metrics["iou_mean"] > 0.70, res.metrics
     assert res.metrics["mse_sdf_surf"] < 1e-4, res.metrics
+
+
+@pytest.mark.needs_checkpoint
+def test_shipped_coap_checkpoint_accuracy(tmp_path):
+    # the COAP baseline trained with the same budget as the shipped VolumetricSMPL checkpoint (docs/eval_coap_anny.json)
+    from volsmpl.volume import DEFAULT_CHECKPOINTS
+
+    res = ev.evaluate_checkpoint(DEFAULT_CHECKPOINTS["coap"], n_bodies=4, n_points=8000, cache_dir=str(tmp_path))
+    assert res.metrics["iou_mean"] > 0.55, res.metrics
+    assert res.metrics["mse_sdf"] is None

@@ -140,10 +140,9 @@ def test_cli_bad_input_messages(tmp_path, capsys):
     assert "contains NaN" in capsys.readouterr().err
 
 
-def test_cli_without_checkpoint_stops_with_attach_volume_message(tmp_path, capsys):
-    from volsmpl.volume import DEFAULT_CHECKPOINTS
-    if DEFAULT_CHECKPOINTS["coap"].with_suffix(".safetensors").exists():
-        pytest.skip("a COAP checkpoint ships now")
+def test_cli_without_checkpoint_stops_with_attach_volume_message(tmp_path, capsys, monkeypatch):
+    from volsmpl import volume as V
+    monkeypatch.setitem(V.DEFAULT_CHECKPOINTS, "coap", tmp_path / "nothing_here")  # as on a body without a shipped one
     assert cli_main(["selfpen", "--model", "coap", "--cases", "deep_squat", "--out", str(tmp_path)]) == 2
     assert "no trained coap checkpoint ships for this body" in capsys.readouterr().err
 
