@@ -166,25 +166,25 @@ class _StubVolume(torch.nn.Module):
 def test_repair_loop_stops_when_no_points_remain(body):
     case = C.load_cases(names=["hands_through_thighs"])[0]
     vol = _StubVolume(k=3)
-    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_prior=1.0))
+    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_selfpen=0.1, w_prior=1.0, stop_checks=1))
     assert r.status == "resolved" and r.iterations == 3 and r.points == [5, 5, 5, 0]
     assert len(r.step_ms) == 3 and r.total_s > 0 and r.pose_change_deg > 0
     assert vol.w.requires_grad and vol.w.grad is None  # only the pose was optimised
     with torch.no_grad():
         wrist = lambda p: body(betas=case.betas[None], body_pose=torch.as_tensor(p)[None]).joints[0, 20, 1]  # noqa: E731
         assert wrist(r.body_pose) < wrist(case.body_pose) - 1e-3  # moved down the loss gradient
-    r2 = repair_case(body, _StubVolume(k=100), case, SelfPenConfig(lr=0.05, max_iters=4))
+    r2 = repair_case(body, _StubVolume(k=100), case, SelfPenConfig(lr=0.05, w_selfpen=0.1, max_iters=4))
     assert r2.status == "max_iters" and r2.iterations == 4
 
 
 def test_repair_stop_checks_redraw_before_stopping(body):
     case = C.load_cases(names=["hands_through_thighs"])[0]
     # one empty draw stops the paper's loop at once ...
-    r = repair_case(body, _StubVolume(pattern=[5, 0, 7]), case, SelfPenConfig(lr=0.5, w_prior=1.0))
+    r = repair_case(body, _StubVolume(pattern=[5, 0, 7]), case, SelfPenConfig(lr=0.5, w_selfpen=0.1, w_prior=1.0, stop_checks=1))
     assert r.status == "resolved" and r.iterations == 1 and r.points == [5, 0]
     # ... with stop_checks=2 the second draw finds points again and the next step uses it; two empty draws stop
     vol = _StubVolume(pattern=[5, 0, 7, 0, 0])
-    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_prior=1.0, stop_checks=2))
+    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_selfpen=0.1, w_prior=1.0, stop_checks=2))
     assert r.status == "resolved" and r.iterations == 2 and r.points == [5, 0, 7, 0, 0] and vol.calls == 5
     assert len(r.step_ms) == 2
     # all draws empty at the start: nothing to repair for the volume
@@ -234,7 +234,17 @@ def test_cli_end_to_end_random_init(tmp_path):
 def test_repaired_case_has_fewer_collisions(body):
     vol = volsmpl.attach_volume(body)
     case = C.load_cases(names=["forearm_through_torso_left"])[0]
-    # the paper's values (lr 1e-5, prior 1e3, selfpen 0.1) leave our body where it is (pose change 0.00 deg: SGD is
-    # only stable for lr * w_prior < 1); provisional values until the tuning run of issue 7 covers both models
-    r = repair_case(body, vol, case, SelfPenConfig(lr=1e-2, w_prior=1.0, w_selfpen=1.0))
+    # the tuned defaults (docs/selfpen_tune.json); the paper's values leave our body where it is
+    r = repair_case(body, vol, case, SelfPenConfig())
     assert r.iterations > 0 and r.collisions_after < r.collisions_before
+
+
+def test_presets():
+    p = SelfPenConfig.preset("paper")
+    assert (p.lr, p.w_selfpen, p.w_prior, p.stop_checks) == (1e-5, 0.1, 1e3, 1)
+    t = SelfPenConfig()
+    assert (t.lr, t.w_selfpen, t.w_prior, t.stop_checks) == (1e-2, 10.0, 1.0, 3)
+    assert t.lr * t.w_prior == pytest.approx(p.lr * p.w_prior)  # the tuning kept the paper's prior step
+    assert SelfPenConfig.preset("paper", lr=1e-3).lr == 1e-3
+    with pytest.raises(ValueError, match="unknown preset 'fast'"):
+        SelfPenConfig.preset("fast")

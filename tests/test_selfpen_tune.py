@@ -36,6 +36,12 @@ def test_combine_and_best_average_over_models():
     assert c["best"]["w_selfpen"] == 10.0  # mean removed (0.9 + 0.1) / 2 = 0.5 < (0.5 + 0.6) / 2 = 0.55
     with pytest.raises(ValueError, match="different cases"):
         combine([a, {**b, "cases": ["x"]}])
+    # a grid point only one model ran is kept but cannot be chosen
+    extra = _run("coap", [(100.0, 1.0)])
+    c = combine([a, b, extra])
+    assert [r["w_selfpen"] for r in c["rows"]] == [1.0, 10.0, 100.0] and c["best"]["w_selfpen"] == 10.0
+    with pytest.raises(ValueError, match="no grid point was run with every model"):
+        combine([_run("volsmpl", [(1.0, 0.5)]), extra])
 
 
 def test_best_ties_prefer_smaller_pose_change():

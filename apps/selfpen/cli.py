@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from .cases import CASES_FILE, load_cases
-from .optimize import PAPER, SelfPenConfig, format_table, repair_case, summarize
+from .optimize import PAPER, PRESETS, SelfPenConfig, format_table, repair_case, summarize
 
 HIGHLIGHT, GREY = (0.9, 0.1, 0.1), (0.75, 0.75, 0.75)
 
@@ -35,13 +35,16 @@ def add_parser(sub):
     p.add_argument("--checkpoint-volsmpl", default=None, help="trained VolumetricSMPL checkpoint")
     p.add_argument("--checkpoint-coap", default=None, help="trained COAP checkpoint")
     p.add_argument("--random-init", action="store_true", help="random network weights (pipeline check only)")
-    p.add_argument("--lr", type=float, default=d.lr, help=f"SGD learning rate (paper {d.lr:g})")
+    p.add_argument("--preset", default="tuned", choices=sorted(PRESETS),
+                   help="hyper-parameter set: 'tuned' (our tuning run, docs/selfpen_tune.json) or 'paper' "
+                        "(lr 1e-5, prior 1e3, self-penetration 0.1); the options below override it")
+    p.add_argument("--lr", type=float, default=None, help=f"SGD learning rate (tuned {d.lr:g}, paper 1e-5)")
     p.add_argument("--max-iters", type=int, default=d.max_iters, help=f"iteration cap (paper {d.max_iters})")
-    p.add_argument("--w-selfpen", type=float, default=d.w_selfpen, help=f"self-penetration weight (paper {d.w_selfpen:g})")
-    p.add_argument("--w-prior", type=float, default=d.w_prior, help=f"pose prior weight (paper {d.w_prior:g})")
+    p.add_argument("--w-selfpen", type=float, default=None, help=f"self-penetration weight (tuned {d.w_selfpen:g}, paper 0.1)")
+    p.add_argument("--w-prior", type=float, default=None, help=f"pose prior weight (tuned {d.w_prior:g}, paper 1e3)")
     p.add_argument("--n-points", type=int, default=d.n_points, help=f"samples per box of a colliding pair (paper {d.n_points})")
-    p.add_argument("--stop-checks", type=int, default=d.stop_checks,
-                   help=f"stop when so many point draws in a row find no penetration (paper {d.stop_checks})")
+    p.add_argument("--stop-checks", type=int, default=None,
+                   help=f"stop when so many point draws in a row find no penetration (tuned {d.stop_checks}, paper 1)")
     p.add_argument("--seed", type=int, default=d.seed, help="seed of the point sampler")
     p.add_argument("--device", default=d.device, choices=["cpu", "cuda"])
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
@@ -94,8 +97,9 @@ def run(args) -> int:
 
     models = parse_models(args.model)
     ckpts = _checkpoints(args, models)
-    cfg = SelfPenConfig(lr=args.lr, max_iters=args.max_iters, w_selfpen=args.w_selfpen, w_prior=args.w_prior,
-                        n_points=args.n_points, stop_checks=args.stop_checks, seed=args.seed, device=args.device)
+    given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks") if getattr(args, k) is not None}
+    cfg = SelfPenConfig.preset(args.preset, max_iters=args.max_iters, n_points=args.n_points, seed=args.seed,
+                               device=args.device, **given)
     if cfg.device == "cuda" and not torch.cuda.is_available():
         raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
     if args.threads:
@@ -136,7 +140,7 @@ def run(args) -> int:
     print("collisions: pose-induced intersecting triangle pairs (rest-pose pairs of the same shape left out), "
           "mean over cases; memory: " + ", ".join(sorted({s['memory_kind'] for s in summaries.values() if s['memory_kind']})))
     result = {
-        "config": asdict(cfg), "models": models, "random_init": bool(args.random_init),
+        "config": asdict(cfg), "preset": args.preset, "models": models, "random_init": bool(args.random_init),
         "checkpoints": {m: (None if args.random_init else str(ckpts[m] or "shipped")) for m in models},
         "case_file": str(args.case_file), "paper": PAPER, "summary": summaries,
         "cases": {m: [r.to_json() for r in rs] for m, rs in per_model.items()},

@@ -85,24 +85,25 @@ def tune(body, volumes: dict, cases, configs, log=print) -> dict:
 
 
 def combine(results: list) -> dict:
-    """Merge tuning runs of different models over the same grid and cases (e.g. run one model at a time)."""
+    """Merge tuning runs over the same cases (e.g. one model, or one part of the grid, at a time). The best
+    grid point is chosen among those that every model has run."""
     first = results[0]
     for r in results[1:]:
         if r["cases"] != first["cases"]:
             raise ValueError(f"tuning runs on different cases cannot be combined: {first['cases']} vs {r['cases']}")
     key = lambda row: (row["lr"], row["w_selfpen"], row["w_prior"])  # noqa: E731
-    rows = {key(row): {**row, "models": dict(row["models"])} for row in first["rows"]}
-    for r in results[1:]:
-        if {key(row) for row in r["rows"]} != set(rows):
-            raise ValueError("tuning runs over different grids cannot be combined")
-        for row in r["rows"]:
-            rows[key(row)]["models"].update(row["models"])
-    rows = list(rows.values())
-    b = best(rows)
-    ck = {}
+    rows, ck = {}, {}
     for r in results:
         ck.update(r.get("checkpoints", {}))
-    return {**first, "rows": rows, "best": {k: b[k] for k in ("lr", "w_selfpen", "w_prior")}, "checkpoints": ck}
+        for row in r["rows"]:
+            rows.setdefault(key(row), {**row, "models": {}})["models"].update(row["models"])
+    models = {m for row in rows.values() for m in row["models"]}
+    complete = [row for row in rows.values() if set(row["models"]) == models]
+    if not complete:
+        raise ValueError(f"no grid point was run with every model ({sorted(models)}); nothing to choose from")
+    b = best(complete)
+    return {**first, "rows": sorted(rows.values(), key=key), "best": {k: b[k] for k in ("lr", "w_selfpen", "w_prior")},
+            "checkpoints": ck}
 
 
 def main(argv=None) -> int:
