@@ -210,6 +210,16 @@ def test_repair_random_volume_and_tpose_unchanged(body, tiny_config):
         repair_case(body, vol, bad)
 
 
+def test_count_collidable_pairs():
+    from volsmpl.apps.selfpen.optimize import count_collidable
+    face_labels = np.array([0, 0, 1, 2, 2])  # part of each of 5 faces
+    mask = np.array([[0, 0, 1], [0, 0, 0], [1, 0, 0]], dtype=bool)  # only parts 0 and 2 may collide
+    pairs = np.array([[0, 1], [0, 2], [1, 3], [4, 0], [2, 3], [3, 4]])
+    # same part (0,1), neighbours 0-1 (0,2), 0-2 twice (1,3), (4,0), 1-2 not allowed (2,3), same part (3,4)
+    assert count_collidable(pairs, face_labels, mask) == 2
+    assert count_collidable(np.zeros((0, 2), int), face_labels, mask) == 0
+
+
 def test_pose_change_geodesic():
     a = np.zeros(69)
     b = np.zeros(69)
@@ -237,6 +247,7 @@ def test_repaired_case_has_fewer_collisions(body):
     # the tuned defaults (docs/selfpen_tune.json); the paper's values leave our body where it is
     r = repair_case(body, vol, case, SelfPenConfig())
     assert r.iterations > 0 and r.collisions_after < r.collisions_before
+    assert 0 < r.target_before <= r.collisions_before and r.target_after < r.target_before
 
 
 def test_presets():

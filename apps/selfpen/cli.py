@@ -130,7 +130,8 @@ def run(args) -> int:
                 print(f"{case.name:28s} {m:8s} no self-intersection: left unchanged")
             else:
                 print(f"{case.name:28s} {m:8s} {r.status:16s} it {r.iterations:3d}  collisions {r.collisions_before:5d} -> "
-                      f"{r.collisions_after:5d}  pose change {r.pose_change_deg:6.2f} deg  {r.total_s:6.2f} s")
+                      f"{r.collisions_after:5d} (collidable parts {r.target_before} -> {r.target_after})  "
+                      f"pose change {r.pose_change_deg:6.2f} deg  {r.total_s:6.2f} s")
         if rendered < args.render and all(r.vertices_before is not None for r in results.values()):
             render_case(out / f"render_{case.name}.png", body.faces, results)
             rendered += 1
@@ -138,7 +139,8 @@ def run(args) -> int:
     print()
     print(format_table(summaries))
     print("collisions: pose-induced intersecting triangle pairs (rest-pose pairs of the same shape left out), "
-          "mean over cases; memory: " + ", ".join(sorted({s['memory_kind'] for s in summaries.values() if s['memory_kind']})))
+          "mean over cases; collidable parts: those of them between two parts the self-penetration loss may push "
+          "apart (not the same part, not neighbours or ignored pairs); memory: " + ", ".join(sorted({s['memory_kind'] for s in summaries.values() if s['memory_kind']})))
     result = {
         "config": asdict(cfg), "preset": args.preset, "models": models, "random_init": bool(args.random_init),
         "checkpoints": {m: (None if args.random_init else str(ckpts[m] or "shipped")) for m in models},
