@@ -101,6 +101,17 @@ def test_case_file_regenerates_identically(body):
     cases = C.load_cases()
     assert len(cases) >= 16 and all(c.collisions > 0 for c in cases)
     assert len({tuple(c.betas.tolist()) for c in cases}) >= 12  # varied shapes
+    collidable = [json.loads(line.rstrip(",\n"))["collidable"] for line in text.splitlines()[1:-1]]
+    assert len(collidable) == len(cases) and min(collidable) > 0
+
+
+def test_case_generator_rejects_folds_only(body):
+    # the head pushed into the raised shoulder: 46 pose-induced pairs, all between the head, the neck region and the
+    # upper arm, which the self-penetration loss never pushes apart (ignored pairs): not a case
+    folds = C._r("head_into_shoulder", "", 15, height=(1.5, 1.75), neck=(0.0, 0.0, 0.4), head=(0.0, 0.0, 0.3),
+                 left_collar=(0.0, 0.0, 0.4), left_shoulder=(0.0, 0.0, -1.45), right_shoulder=C.ARMS_DOWN_R)
+    with pytest.raises(ValueError, match="none between parts that may collide"):
+        C.generate_cases(body, recipes=[folds])
 
 
 def _write(tmp_path, cases):

@@ -65,33 +65,33 @@ RECIPES = (
     _r("crossed_legs_seated", "sitting, right thigh crossed through the left", 6, gender=(0.5, 1.0),
        left_hip=(-1.5, 0.0, 0.0), right_hip=(-1.7, 0.0, 0.45), left_knee=(1.5, 0.0, 0.0), right_knee=(1.4, 0.0, 0.0),
        left_shoulder=ARMS_DOWN_L, right_shoulder=ARMS_DOWN_R),
-    _r("arm_through_head", "right forearm swung through the head", 7, height=(1.6, 1.9),
-       right_shoulder=(0.0, 0.5, -0.9), right_elbow=(0.0, 2.2, 0.0), left_shoulder=ARMS_DOWN_L),
+    _r("arm_through_head", "right arm raised, forearm bent through the head", 7, height=(1.6, 1.9),
+       right_shoulder=(0.8, -0.6, -1.6), right_elbow=(0.0, -1.6, 0.0), left_shoulder=ARMS_DOWN_L),
     _r("forearm_through_shoulder", "left forearm raised across the chest into the right shoulder", 8, gender=(0.0, 0.5),
        left_shoulder=(0.0, -1.3, -0.1), left_elbow=(0.0, -2.5, 0.0), left_wrist=(0.0, 0.0, 0.5), right_shoulder=ARMS_DOWN_R),
     _r("deep_squat", "deep squat, calves inside the thighs", 9,
        left_hip=(-1.9, 0.0, 0.35), right_hip=(-1.9, 0.0, -0.35), left_knee=(2.6, 0.0, 0.0), right_knee=(2.6, 0.0, 0.0),
        left_ankle=(-0.5, 0.0, 0.0), right_ankle=(-0.5, 0.0, 0.0), spine1=(0.35, 0.0, 0.0),
        left_shoulder=(0.0, -1.2, -0.6), right_shoulder=(0.0, 1.2, 0.6)),
-    _r("sitting_on_heels", "kneeling back onto the heels, calves in the thighs", 10, height=(1.38, 1.65),
-       left_hip=(-0.4, 0.0, 0.05), right_hip=(-0.4, 0.0, -0.05), left_knee=(2.6, 0.0, 0.0), right_knee=(2.6, 0.0, 0.0),
-       left_ankle=(0.45, 0.0, 0.0), right_ankle=(0.45, 0.0, 0.0), left_shoulder=ARMS_DOWN_L, right_shoulder=ARMS_DOWN_R),
+    _r("sitting_on_heels", "kneeling back onto the heels, heels inside the buttocks", 10, height=(1.38, 1.65),
+       left_hip=(0.0, 0.0, 0.05), right_hip=(0.0, 0.0, -0.05), left_knee=(3.0, 0.0, 0.0), right_knee=(3.0, 0.0, 0.0),
+       left_ankle=(1.1, 0.0, 0.0), right_ankle=(1.1, 0.0, 0.0), left_shoulder=ARMS_DOWN_L, right_shoulder=ARMS_DOWN_R),
     _r("knee_into_chest", "left thigh pulled through the belly", 11, gender=(0.0, 0.3),
        left_hip=(-2.3, 0.0, 0.0), left_knee=(1.6, 0.0, 0.0), spine1=(0.5, 0.0, 0.0), spine2=(0.3, 0.0, 0.0),
        left_shoulder=ARMS_DOWN_L, right_shoulder=ARMS_DOWN_R),
     _r("arms_crossed_deep", "arms folded through each other and the chest", 12, height=(1.8, 2.03),
        left_shoulder=(0.0, -1.2, -1.0), right_shoulder=(0.0, 1.2, 1.0), left_elbow=(0.0, -2.4, 0.0), right_elbow=(0.0, 2.4, 0.0)),
     _r("forward_bend_arms_in_legs", "bent forward, arms hanging into the thighs", 14,
-       spine1=(0.6, 0.0, 0.0), spine2=(0.4, 0.0, 0.0), spine3=(0.35, 0.0, 0.0),
-       left_shoulder=(0.0, -1.45, -0.3), right_shoulder=(0.0, 1.45, 0.3)),
-    _r("head_into_shoulder", "head tilted and pushed into a raised left shoulder", 15, height=(1.5, 1.75),
-       neck=(0.0, 0.0, 0.4), head=(0.0, 0.0, 0.3), left_collar=(0.0, 0.0, 0.4), left_shoulder=(0.0, 0.0, -1.45),
+       spine1=(0.69, 0.0, 0.0), spine2=(0.64, 0.0, 0.0), spine3=(0.8, 0.0, 0.0),
+       left_shoulder=(0.0, -1.7, -0.99), right_shoulder=(0.0, 1.61, -0.31)),
+    _r("head_into_forearm", "head tilted into the raised, bent left forearm", 15, height=(1.5, 1.75),
+       neck=(0.0, 0.0, -0.4), head=(0.0, 0.0, -0.3), left_shoulder=(0.8, 0.6, 1.6), left_elbow=(0.0, 2.0, 0.0),
        right_shoulder=ARMS_DOWN_R),
     _r("crossed_ankles", "ankles crossed, left foot through the right shin", 16, gender=(0.4, 1.0),
        left_hip=(0.0, 0.0, -0.35), right_hip=(0.0, 0.0, 0.2), left_knee=(0.3, 0.0, 0.0),
        left_shoulder=ARMS_DOWN_L, right_shoulder=ARMS_DOWN_R),
-    _r("hand_behind_into_buttock", "right arm swung back, hand inside the buttock", 17, height=(1.7, 2.03),
-       right_shoulder=(0.0, -0.5, 1.45), left_shoulder=ARMS_DOWN_L),
+    _r("hand_behind_into_buttock", "right arm swung back and down, hand inside the buttock", 17, height=(1.7, 2.03),
+       right_shoulder=(0.0, 1.03, 2.03), right_elbow=(0.0, 1.04, 0.0), left_shoulder=(0.0, 0.0, -0.79)),
     _r("elbows_into_waist", "elbows pressed into the waist, forearms forward", 18, gender=(0.0, 1.0), yaw=0.5,
        left_shoulder=(0.0, 0.2, -1.55), right_shoulder=(0.0, -0.2, 1.55), left_elbow=(0.0, -1.5, 0.0), right_elbow=(0.0, 1.5, 0.0)),
 )
@@ -131,25 +131,34 @@ def build_case(recipe: Recipe) -> dict:
 
 
 def generate_cases(body=None, recipes=RECIPES, log=None) -> list[dict]:
-    """Build every recipe and count its pose-induced triangle collisions (stored as 'collisions').
+    """Build every recipe and count its pose-induced triangle collisions (stored as 'collisions') and
+    those between two parts the self-penetration loss may push apart ('collidable': not the same part,
+    not kinematic neighbours or COAP's ignored pairs, see optimize.count_collidable).
 
-    Raises ValueError when a recipe does not self-intersect (the case set must only hold such bodies).
+    Raises ValueError when a recipe has no collidable collision: the case set must only hold bodies a
+    volumetric self-penetration loss can act on (folds at joints alone do not count).
     """
     from volsmpl import create_body
+    from volsmpl.partition import Partition
+    from .optimize import count_collidable
     from .triangles import body_collisions
 
     body = body or create_body()
+    part = Partition(body)
+    labels, mask = part.face_labels.cpu().numpy(), part.collision_mask.cpu().numpy()
     out = []
     for r in recipes:
         d = build_case(r)
         c = case_from_dict(d)
-        n = len(body_collisions(body, c.betas, c.global_orient, c.body_pose)["pairs"])
-        if n == 0:
-            raise ValueError(f"recipe {r.name!r} does not self-intersect on the default body; change its angles")
-        d["collisions"] = n
+        pairs = body_collisions(body, c.betas, c.global_orient, c.body_pose)["pairs"]
+        n, k = len(pairs), count_collidable(pairs, labels, mask)
+        if k == 0:
+            raise ValueError(f"recipe {r.name!r} has {n} pose-induced intersecting triangle pairs on the default body but "
+                             f"none between parts that may collide; change its angles so the limbs really cross")
+        d["collisions"], d["collidable"] = n, k
         out.append(d)
         if log:
-            log(f"{r.name:28s} {n:5d} intersecting triangle pairs")
+            log(f"{r.name:28s} {n:5d} intersecting triangle pairs, {k:5d} between collidable parts")
     return out
 
 
