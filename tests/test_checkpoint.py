@@ -4,7 +4,7 @@ import os
 import pytest
 import torch
 
-from volsmpl.checkpoint import CheckpointError, checkpoint_paths, load_checkpoint, save_checkpoint
+from volsmpl.checkpoint import CheckpointError, checkpoint_model, checkpoint_paths, load_checkpoint, save_checkpoint
 from volsmpl.nn.config import VolumeConfig
 
 
@@ -36,6 +36,18 @@ def test_shared_storage_and_module_state(tmp_path):
     save_checkpoint(tmp_path / "m", sd, {}, {})
     sd2, _, _ = load_checkpoint(tmp_path / "m")
     assert torch.equal(sd2["w_alias"], lin.weight.detach())
+
+
+def test_config_only_and_model_kind(tmp_path):
+    sd, cfg, meta = _save(tmp_path)
+    none, cfg2, meta2 = load_checkpoint(tmp_path / "model", weights=False)
+    assert none is None and cfg2 == cfg and meta2 == meta
+    assert checkpoint_model(tmp_path / "model") == "volsmpl"
+    from volsmpl.nn.coap_net import CoapConfig
+    save_checkpoint(tmp_path / "coap", sd, CoapConfig().to_dict(), meta)
+    assert checkpoint_model(tmp_path / "coap.safetensors") == "coap"
+    with pytest.raises(CheckpointError, match="not found"):
+        checkpoint_model(tmp_path / "nothing")
 
 
 def test_missing_file(tmp_path):
