@@ -258,7 +258,7 @@ def test_repaired_case_has_fewer_collisions(body):
     # the tuned defaults (docs/selfpen_tune.json); the paper's values leave our body where it is
     r = repair_case(body, vol, case, SelfPenConfig())
     assert r.iterations > 0 and r.collisions_after < r.collisions_before
-    assert 0 < r.target_before <= r.collisions_before and r.target_after < r.target_before
+    assert 0 < r.collidable_before <= r.collisions_before and r.collidable_after < r.collidable_before
 
 
 def test_presets():

@@ -130,7 +130,7 @@ def run(args) -> int:
                 print(f"{case.name:28s} {m:8s} no self-intersection: left unchanged")
             else:
                 print(f"{case.name:28s} {m:8s} {r.status:16s} it {r.iterations:3d}  collisions {r.collisions_before:5d} -> "
-                      f"{r.collisions_after:5d} (collidable parts {r.target_before} -> {r.target_after})  "
+                      f"{r.collisions_after:5d} (collidable parts {r.collidable_before} -> {r.collidable_after})  "
                       f"pose change {r.pose_change_deg:6.2f} deg  {r.total_s:6.2f} s")
         if rendered < args.render and all(r.vertices_before is not None for r in results.values()):
             render_case(out / f"render_{case.name}.png", body.faces, results)

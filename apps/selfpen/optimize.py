@@ -96,8 +96,8 @@ class RepairResult:
     # pose-induced pairs whose triangles lie on two parts that may collide (partition.collision_mask): the
     # collisions a volumetric self-penetration loss can see; the rest are same-part or neighbouring-part
     # pairs (LBS folds at joints), left alone by design. None when the volume has no partition.
-    target_before: int | None = None
-    target_after: int | None = None
+    collidable_before: int | None = None
+    collidable_after: int | None = None
     pose_change_deg: float = 0.0  # mean over the 23 body joints of the geodesic rotation change
     loss: list = field(default_factory=list)  # total loss per step
     points: list = field(default_factory=list)  # penetration samples per evaluation
@@ -199,8 +199,8 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
     part = getattr(volume, "partition", None)
     if part is not None:
         fl, cm = part.face_labels.cpu().numpy(), part.collision_mask.cpu().numpy()
-        res.target_before = count_collidable(before["pairs"], fl, cm)
-        res.target_after = count_collidable(after["pairs"], fl, cm)
+        res.collidable_before = count_collidable(before["pairs"], fl, cm)
+        res.collidable_after = count_collidable(after["pairs"], fl, cm)
     res.pose_change_deg = pose_change_deg(case.body_pose, final_pose)
     res.body_pose = final_pose.tolist()
     if keep_meshes:
@@ -280,8 +280,8 @@ def summarize(results: list[RepairResult]) -> dict:
         "collisions_before": mean([r.collisions_before for r in active]),
         "collisions_after": mean([r.collisions_after for r in active]),
         "raw_collisions_after": mean([r.raw_after for r in active]),
-        "target_before": mean([r.target_before for r in active if r.target_before is not None]),
-        "target_after": mean([r.target_after for r in active if r.target_after is not None]),
+        "collidable_before": mean([r.collidable_before for r in active if r.collidable_before is not None]),
+        "collidable_after": mean([r.collidable_after for r in active if r.collidable_after is not None]),
         "pose_change_deg": mean([r.pose_change_deg for r in active]),
     }
 
@@ -295,7 +295,7 @@ def format_table(summaries: dict) -> str:
     for m, s in summaries.items():
         lines.append(f"{'ours ' + names.get(m, m):24s} {s['step_ms']:8.1f} {s['memory_gb']:8.3f} {s['iterations']:7.2f} "
                      f"{s['total_s']:8.3f} {s['collisions_before']:12.1f} {s['collisions_after']:11.1f} {s['pose_change_deg']:12.3f} "
-                     f"{s['target_before']:7.1f} -> {s['target_after']:5.1f}")
+                     f"{s['collidable_before']:7.1f} -> {s['collidable_after']:5.1f}")
     for m in ("coap", "volsmpl"):
         p = PAPER[m]
         lines.append(f"{'paper ' + names[m]:24s} {p['step_ms']:8.1f} {p['memory_gb']:8.3f} {p['iterations']:7.2f} "
