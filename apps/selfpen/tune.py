@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from .cases import load_cases
-from .optimize import SelfPenConfig, repair_case
+from .optimize import SelfPenConfig, repair_case, summarize
 
 # default grid: learning rate and the two weights (w_selfpen, w_prior); module docstring
 GRID_LR = (1e-2,)
@@ -47,23 +47,28 @@ def grid_configs(base: SelfPenConfig, lrs=GRID_LR, w_selfpens=GRID_W_SELFPEN, w_
 
 
 def score(results) -> dict:
-    """Mean over cases with collisions of the fraction of collisions removed, iterations, pose change."""
-    act = [r for r in results if r.collisions_before > 0]
-    if not act:
-        return {"removed": float("nan"), "iterations": float("nan"), "pose_change_deg": float("nan"), "cases": 0}
-    return {
-        "removed": float(np.mean([1.0 - r.collisions_after / r.collisions_before for r in act])),
-        "iterations": float(np.mean([r.iterations for r in act])),
-        "pose_change_deg": float(np.mean([r.pose_change_deg for r in act])),
-        "collisions_after": float(np.mean([r.collisions_after for r in act])),
-        "cases": len(act),
-    }
+    """`optimize.summarize`'s iterations, pose change and collisions after (means over the cases with
+    collisions), plus the mean fraction of collisions removed."""
+    s = summarize(results)
+    act = [r for r in results if r.status != "no_intersection"]
+    removed = float(np.mean([1.0 - r.collisions_after / r.collisions_before for r in act])) if act else float("nan")
+    return {"removed": removed, "iterations": s["iterations"], "pose_change_deg": s["pose_change_deg"],
+            "collisions_after": s["collisions_after"], "cases": s["cases_with_collisions"]}
+
+
+def _point(row: dict) -> tuple:
+    """The grid point (lr, w_selfpen, w_prior) of a row."""
+    return row["lr"], row["w_selfpen"], row["w_prior"]
 
 
 def best(rows: list) -> dict:
     """The row (grid point) with the largest 'removed' averaged over models; ties: smaller pose change."""
     return max(rows, key=lambda r: (round(np.mean([s["removed"] for s in r["models"].values()]), 4),
                                     -np.mean([s["pose_change_deg"] for s in r["models"].values()])))
+
+
+def _best_point(rows: list) -> dict:
+    return dict(zip(("lr", "w_selfpen", "w_prior"), _point(best(rows))))
 
 
 def tune(body, volumes: dict, cases, configs, log=print) -> dict:
@@ -79,8 +84,7 @@ def tune(body, volumes: dict, cases, configs, log=print) -> dict:
             log(f"lr {cfg.lr:g} w_selfpen {cfg.w_selfpen:g} w_prior {cfg.w_prior:g} {m:8s} removed {100 * s['removed']:5.1f} % "
                 f"it {s['iterations']:6.1f} pose change {s['pose_change_deg']:5.2f} deg ({s['seconds']:.0f} s)")
         rows.append(row)
-    b = best(rows)
-    return {"rows": rows, "best": {k: b[k] for k in ("lr", "w_selfpen", "w_prior")}, "cases": [c.name for c in cases],
+    return {"rows": rows, "best": _best_point(rows), "cases": [c.name for c in cases],
             "base_config": asdict(configs[0])}
 
 
@@ -91,19 +95,16 @@ def combine(results: list) -> dict:
     for r in results[1:]:
         if r["cases"] != first["cases"]:
             raise ValueError(f"tuning runs on different cases cannot be combined: {first['cases']} vs {r['cases']}")
-    key = lambda row: (row["lr"], row["w_selfpen"], row["w_prior"])  # noqa: E731
     rows, ck = {}, {}
     for r in results:
         ck.update(r.get("checkpoints", {}))
         for row in r["rows"]:
-            rows.setdefault(key(row), {**row, "models": {}})["models"].update(row["models"])
+            rows.setdefault(_point(row), {**row, "models": {}})["models"].update(row["models"])
     models = {m for row in rows.values() for m in row["models"]}
     complete = [row for row in rows.values() if set(row["models"]) == models]
     if not complete:
         raise ValueError(f"no grid point was run with every model ({sorted(models)}); nothing to choose from")
-    b = best(complete)
-    return {**first, "rows": sorted(rows.values(), key=key), "best": {k: b[k] for k in ("lr", "w_selfpen", "w_prior")},
-            "checkpoints": ck}
+    return {**first, "rows": sorted(rows.values(), key=_point), "best": _best_point(complete), "checkpoints": ck}
 
 
 def main(argv=None) -> int:
