@@ -20,6 +20,10 @@ so every wrong-sign point more than 2 cm from the surface is a stable fixed poin
 identical to eq. 3 wherever the sign is right and pointing across the surface where it is not;
 `residual='abs'` is eq. 3 to the letter.
 
+Weight averaging (`ema_decay` > 0): the checkpoints publish an exponential moving average of the weights as
+the model (what eval and shipping read) and keep the optimised weights beside it for --resume. A fine-tuning
+phase starts from a model checkpoint (--init) and anneals from `lr` at step `anneal_start` to `lr_final`.
+
 Data of step s on rank r depend only on (seed, s, r), so a resumed run continues exactly. Checkpoints
 (model + optimiser, safetensors; nothing pickled) are written to <out>/ckpt-<step>/ and published by
 atomically replacing <out>/latest; <out>/log.csv holds the losses. Multi-process: torchrun (DDP, gloo on
@@ -59,6 +63,8 @@ class TrainConfig:
     batch_size: int = 8             # paper: 8
     lr: float = 1e-4                # paper: 1e-4 annealed to 1e-5
     lr_final: float = 1e-5
+    anneal_start: int = 0           # step at which the annealing from lr starts (a fine-tuning phase after --init)
+    ema_decay: float = 0.0          # > 0: keep an exponential moving average of the weights; checkpoints' model is the EMA
     n_uniform: int = 256            # per part, uniform in its padded box (paper)
     n_surface: int = 256            # per part, near the surface (paper)
     surface_sigma: tuple = (0.01, 0.05)  # metres; see volsmpl.groundtruth
@@ -82,6 +88,10 @@ class TrainConfig:
     def __post_init__(self):
         if self.gt_sign not in SIGN_MODES:
             raise ValueError(f"gt_sign must be one of {SIGN_MODES}, got {self.gt_sign!r}")
+        if not 0.0 <= self.ema_decay < 1.0:
+            raise ValueError(f"ema_decay must be in [0, 1) (0 turns the average off), got {self.ema_decay}")
+        if not 0 <= self.anneal_start < self.steps:
+            raise ValueError(f"anneal_start must be in [0, steps={self.steps}), got {self.anneal_start}")
         if self.residual not in ("signed", "abs"):
             raise ValueError(f"residual must be 'signed' or 'abs', got {self.residual!r}")
         if self.model_kind == "coap" and isinstance(self.model, VolumeConfig):
@@ -117,8 +127,35 @@ class TrainConfig:
 
 
 def lr_at(cfg: TrainConfig, step: int) -> float:
-    """Exponential annealing from lr to lr_final over cfg.steps."""
-    return cfg.lr * (cfg.lr_final / cfg.lr) ** min(1.0, step / max(1, cfg.steps))
+    """Exponential annealing from lr (at step cfg.anneal_start and before) to lr_final (at cfg.steps)."""
+    t = (step - cfg.anneal_start) / (cfg.steps - cfg.anneal_start)
+    return cfg.lr * (cfg.lr_final / cfg.lr) ** min(1.0, max(0.0, t))
+
+
+class WeightEMA:
+    """Exponential moving average of a module's floating-point state (weights and float buffers).
+
+    avg <- avg + (1 - decay_t) * (live - avg) after every optimiser step, with decay_t = min(decay, (1 + n) / (10 + n))
+    (n = updates so far in this process' average) so that an average started from fresh weights forgets them quickly.
+    The average of a run is what its checkpoints publish as the model; the live weights are kept beside it
+    (live.safetensors) so that --resume continues the optimisation, not the average.
+    """
+
+    def __init__(self, module: torch.nn.Module, decay: float, state: dict | None = None, updates: int = 0):
+        self.decay, self.updates = decay, updates
+        live = module.state_dict()
+        src = live if state is None else state
+        self.avg = {k: src[k].detach().clone().to(v.device) for k, v in live.items()}
+
+    @torch.no_grad()
+    def update(self, module: torch.nn.Module) -> None:
+        d = min(self.decay, (1 + self.updates) / (10 + self.updates))
+        for k, v in module.state_dict().items():
+            if v.is_floating_point():
+                self.avg[k].lerp_(v.detach(), 1.0 - d)
+            else:
+                self.avg[k].copy_(v)
+        self.updates += 1
 
 
 def sdf_loss(pred: torch.Tensor, gt: torch.Tensor, cfg: TrainConfig) -> tuple[torch.Tensor, dict]:
@@ -230,8 +267,11 @@ def _load_optimizer(opt: torch.optim.Optimizer, tensors: dict, scalars: dict) ->
         g.update({k: (tuple(v) if isinstance(v, list) else v) for k, v in saved.items()})
 
 
-def save_training_state(out_dir: Path, step: int, volume, opt, cfg: TrainConfig, summary: dict) -> Path:
-    """Write <out>/ckpt-<step>/{model,optimizer}.* and atomically point <out>/latest at it."""
+def save_training_state(out_dir: Path, step: int, volume, opt, cfg: TrainConfig, summary: dict,
+                        ema: WeightEMA | None = None) -> Path:
+    """Write <out>/ckpt-<step>/{model,optimizer}.* and atomically point <out>/latest at it.
+
+    With an EMA the model file holds the averaged weights and live.safetensors the optimised ones."""
     from safetensors.torch import save_file
 
     d = out_dir / f"ckpt-{step:08d}"
@@ -240,7 +280,13 @@ def save_training_state(out_dir: Path, step: int, volume, opt, cfg: TrainConfig,
     tmp.mkdir(parents=True)
     meta = {"body_fingerprint": volume.fingerprint, "part_table": volume.partition.table.to_dict(),
             "training": {**summary, "step": step, "train_config": cfg.to_dict()}}
-    save_checkpoint(tmp / "model", {k: v.detach().cpu() for k, v in volume.net.state_dict().items()}, cfg.model.to_dict(), meta)
+    live = {k: v.detach().cpu() for k, v in volume.net.state_dict().items()}
+    if ema is not None:
+        meta["training"]["ema_updates"] = ema.updates
+        save_checkpoint(tmp / "model", {k: v.detach().cpu() for k, v in ema.avg.items()}, cfg.model.to_dict(), meta)
+        save_file(live, str(tmp / "live.safetensors"))
+    else:
+        save_checkpoint(tmp / "model", live, cfg.model.to_dict(), meta)
     tensors, scalars = _optimizer_tensors(opt)
     save_file(tensors, str(tmp / "optimizer.safetensors"))
     (tmp / "optimizer.json").write_text(json.dumps({**scalars, "step": step}))
@@ -305,7 +351,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     torch.manual_seed(cfg.seed)
     body = create_body()
     volume = attach_volume(body, pretrained=False, model=cfg.model_kind, config=cfg.model)
-    start, spent = 0, 0.0
+    start, spent, ema_state, ema_updates = 0, 0.0, None, 0
     ck = latest_checkpoint(out_dir) if resume else None
     if resume and ck is None and not quiet and rank == 0:
         print(f"no checkpoint in {out_dir}: starting from scratch", file=sys.stderr)
@@ -327,12 +373,20 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         if saved_cfg["model"] != cfg.model.to_dict():
             raise ValueError(f"{ck} was trained with model config {saved_cfg['model']}, not {cfg.model.to_dict()}; "
                              f"resume with the run's own config ({out_dir}/config.json).")
+        ema_state, ema_updates = None, 0
+        if (ck / "live.safetensors").exists():  # the model file is the average; optimise on from the live weights
+            ema_state, state = state, load_file(str(ck / "live.safetensors"))
+            ema_updates = int(meta["training"].get("ema_updates", 0))
         volume.net.load_state_dict(state)
         _load_optimizer(opt, load_file(str(ck / "optimizer.safetensors")), json.loads((ck / "optimizer.json").read_text()))
         start = meta["training"]["step"]
         spent = float(meta["training"].get("train_seconds", 0.0))
     volume.to(device)
     volume.train()
+    if ema_state is not None and not cfg.ema_decay:
+        raise ValueError(f"{ck} holds averaged weights (ema_decay > 0) but the config has ema_decay=0; resume with "
+                         f"the run's own config ({out_dir}/config.json).")
+    ema = WeightEMA(volume.net, cfg.ema_decay, ema_state, ema_updates) if cfg.ema_decay else None
     volume.net.encoder_bf16 = cfg.encoder_bf16
     step_mod = TrainStep(volume, cfg)  # the body stays on the CPU: batches (and exact GT) are made there
     model = torch.nn.parallel.DistributedDataParallel(step_mod) if world > 1 else step_mod
@@ -367,6 +421,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         if not math.isfinite(loss):  # before the update, so the last checkpoint stays sound
             raise RuntimeError(f"loss became {loss} at step {step}; lower the learning rate or check the data.")
         opt.step()
+        if ema is not None:
+            ema.update(volume.net)
         losses.append(loss)
         last = {"step": step + 1, "loss": loss, **parts}
         if rank == 0 and ((step + 1) % cfg.log_every == 0 or step + 1 == end):
@@ -385,7 +441,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
             dist.all_reduce(flag)
             over = bool(flag.item() > 0)
         if rank == 0 and ((step + 1) % cfg.ckpt_every == 0 or step + 1 == end or over):
-            save_training_state(out_dir, step + 1, volume, opt, cfg, {"loss": loss, "train_seconds": round(used, 1)})
+            save_training_state(out_dir, step + 1, volume, opt, cfg, {"loss": loss, "train_seconds": round(used, 1)}, ema)
         if over:
             break
     if logf:

@@ -194,3 +194,46 @@ def test_bad_loss_and_sign_options_fail_at_construction():
         TrainConfig(residual="l1")
     with pytest.raises(ValueError, match="gt_sign"):
         TrainConfig(gt_sign="parity")
+
+
+def test_lr_anneal_start():
+    cfg = TrainConfig(steps=300, anneal_start=100, lr=1e-4, lr_final=1e-5)
+    assert lr_at(cfg, 0) == lr_at(cfg, 100) == pytest.approx(1e-4)
+    assert lr_at(cfg, 200) == pytest.approx(1e-4 * 0.1 ** 0.5) and lr_at(cfg, 300) == pytest.approx(1e-5)
+    with pytest.raises(ValueError, match="anneal_start"):
+        TrainConfig(steps=100, anneal_start=100)
+    with pytest.raises(ValueError, match="ema_decay"):
+        TrainConfig(ema_decay=1.0)
+
+
+def test_weight_ema_matches_hand_average():
+    """The average follows avg += (1 - d_n)(w - avg), d_n = min(decay, (1+n)/(10+n)), buffers copied."""
+    from volsmpl.train import WeightEMA
+    lin = torch.nn.Linear(2, 1)
+    w0 = lin.weight.detach().clone()
+    ema = WeightEMA(lin, decay=0.5)
+    expect = w0.clone()
+    for n in range(4):
+        with torch.no_grad():
+            lin.weight.add_(1.0)
+        ema.update(lin)
+        d = min(0.5, (1 + n) / (10 + n))
+        expect = expect + (1 - d) * (lin.weight.detach() - expect)
+    assert torch.allclose(ema.avg["weight"], expect) and not torch.allclose(expect, lin.weight)
+
+
+def test_ema_checkpoint_publishes_the_average_and_resumes_exactly(tmp_path):
+    from safetensors.torch import load_file
+    cfg = tiny_cfg(ema_decay=0.9)
+    full = train(cfg, tmp_path / "a", max_steps=4, quiet=True)
+    train(cfg, tmp_path / "b", max_steps=2, quiet=True)
+    resumed = train(cfg, tmp_path / "b", resume=True, max_steps=2, quiet=True)
+    assert resumed["losses"] == pytest.approx(full["losses"][2:], rel=1e-5, abs=1e-7)  # optimised from live weights
+    a, b = tmp_path / "a" / "ckpt-00000004", tmp_path / "b" / "ckpt-00000004"
+    avg_a, avg_b = load_file(str(a / "model.safetensors")), load_file(str(b / "model.safetensors"))
+    live = load_file(str(a / "live.safetensors"))
+    assert all(torch.allclose(avg_a[k], avg_b[k], atol=1e-6) for k in avg_a)  # the average resumes too
+    assert any(not torch.allclose(avg_a[k], live[k]) for k in avg_a)  # and it is not the live weights
+    assert json.loads((b / "model.json").read_text())["meta"]["training"]["ema_updates"] == 4
+    with pytest.raises(ValueError, match="ema_decay"):
+        train(dataclasses.replace(cfg, ema_decay=0.0), tmp_path / "b", resume=True, max_steps=1, quiet=True)
