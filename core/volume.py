@@ -31,6 +31,7 @@ from .partition import Partition
 from .validate import check_points
 
 ASSETS = Path(__file__).resolve().parent / "assets"
+SELFPEN_TAU = 0.01  # metres: SDF scale of the self-penetration loss's soft occupancy (Volume.selfpen_loss)
 DEFAULT_CHECKPOINTS = {"volsmpl": ASSETS / "volsmpl_anny", "coap": ASSETS / "coap_anny"}
 
 
@@ -38,7 +39,8 @@ DEFAULT_CHECKPOINTS = {"volsmpl": ASSETS / "volsmpl_anny", "coap": ASSETS / "coa
 class Encoding:
     """Per-forward-output body encoding. G (B, K, 4, 4) part-to-world; box_min/max (B, K, 3) padded
     boxes in part frames; code: PartCode (z_k and generated decoder weights); center (B, K, 3) and
-    scale (B, K, 1) of the part normalisation (config.normalize_parts), else None."""
+    scale (B, K, 1) of the part normalisation (config.normalize_parts), else None. parts: None when all
+    K parts are encoded; else the (K',) int64 ids of an encoded part subset, and every K axis above is K'."""
 
     G: torch.Tensor
     box_min: torch.Tensor
@@ -48,6 +50,7 @@ class Encoding:
     ref: tuple | None = None  # detached (vertices, joints, full_pose) of a constant output, for value reuse
     center: torch.Tensor | None = None
     scale: torch.Tensor | None = None
+    parts: torch.Tensor | None = None
 
 
 def _stamp(out) -> tuple:
@@ -98,15 +101,10 @@ class Volume(torch.nn.Module):
             if not torch.is_tensor(getattr(out, name, None)):
                 raise TypeError(f"expected a body forward output with tensor '{name}' (call body(...) first), got {type(out).__name__}")
         use_cache = generator is None and not self.training
-        stamp = _stamp(out)
         if use_cache:
-            cached = getattr(out, "_volsmpl_encoding", None)
-            if cached is not None and cached[0] is self and cached[1].stamp == stamp:
-                return cached[1]
-            last, no_grad = self._last, not (out.vertices.requires_grad or out.joints.requires_grad)
-            if no_grad and last is not None and last.ref[0].shape == out.vertices.shape and all(
-                    torch.equal(a, b) for a, b in zip(last.ref, (out.vertices, out.joints, out.full_pose))):
-                return last  # same pose, shape and translation as the previous constant output
+            cached = self._cached(out)
+            if cached is not None:
+                return cached
         enc = self._encode(out, generator)
         if use_cache:
             try:
@@ -118,7 +116,26 @@ class Volume(torch.nn.Module):
                 self._last = enc
         return enc
 
-    def _encode(self, out, generator) -> Encoding:
+    def _cached(self, out) -> Encoding | None:
+        """The encoding of `out` made earlier (same tensors, or equal constant tensors), else None."""
+        cached = getattr(out, "_volsmpl_encoding", None)
+        if cached is not None and cached[0] is self and cached[1].stamp == _stamp(out):
+            return cached[1]
+        last, no_grad = self._last, not (out.vertices.requires_grad or out.joints.requires_grad)
+        if no_grad and last is not None and last.ref[0].shape == out.vertices.shape and all(
+                torch.equal(a, b) for a, b in zip(last.ref, (out.vertices, out.joints, out.full_pose))):
+            return last  # same pose, shape and translation as the previous constant output
+        return None
+
+    def _frames(self, out):
+        """Part transforms G (B, K, 4, 4) and padded part boxes (B, K, 3) x2 of a body output: no network."""
+        p = self.partition
+        G = p.part_transforms(out.full_pose, out.joints)
+        return (G, *p.boxes(out.vertices, G))
+
+    def _encode(self, out, generator, parts: torch.Tensor | None = None, frames=None) -> Encoding:
+        """Encode all parts, or only `parts` ((K',) int64 ids; the Encoding's K axis is then K').
+        frames: (G, box_min, box_max) of `out` when already computed (see _frames)."""
         v, dtype = out.vertices, out.vertices.dtype
         if v.ndim != 3 or v.shape[-1] != 3:
             raise ValueError(f"out.vertices must be (B, V, 3), got {tuple(v.shape)}")
@@ -126,15 +143,18 @@ class Volume(torch.nn.Module):
         if p.faces.device != v.device or next(self.net.parameters()).dtype != dtype:
             raise ValueError(f"the body output is {dtype} on {v.device} but the volume is "
                              f"{next(self.net.parameters()).dtype} on {p.faces.device}; move it with body.volume.to(device, dtype).")
-        G = p.part_transforms(out.full_pose, out.joints)
-        box_min, box_max = p.boxes(v, G)
-        local = p.to_part_frames(p.surface_points(v, generator), G)  # (B, K, n, 3)
+        G, box_min, box_max = self._frames(out) if frames is None else frames
+        surface = p.surface_points(v, generator)  # (B, K, n, 3)
+        if parts is not None:
+            G, box_min, box_max, surface = G[:, parts], box_min[:, parts], box_max[:, parts], surface[:, parts]
+        local = p.to_part_frames(surface, G)
         center = scale = None
         if getattr(self.net.config, "normalize_parts", False):
             center, scale = part_normalization(box_min, box_max)
             local = (local - center[:, :, None]) / scale[:, :, None]
-        return Encoding(G=G, box_min=box_min, box_max=box_max, code=self.net.encode(local), stamp=_stamp(out),
-                        center=center, scale=scale)
+        code = self.net.encode(local) if parts is None else self.net.encode(local, parts)
+        return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, stamp=_stamp(out),
+                        center=center, scale=scale, parts=parts)
 
     # ------------------------------------------------------------------ evaluation core
     @property
@@ -240,34 +260,49 @@ class Volume(torch.nn.Module):
         return pen.mean() if pen.numel() else pen.sum()
 
     def selfpen_loss(self, out, n_points: int = 300, generator: torch.Generator | None = None,
-                     return_points: bool = False):
+                     return_points: bool = False, tau: float = SELFPEN_TAU):
         """Self-penetration loss (paper eq. 5, supplementary C.4), per body.
 
         1. Find intersecting padded part boxes (exact oriented-box test), skipping kinematically
            adjacent parts and COAP's ignored pairs (partition.collision_mask).
         2. Sample n_points uniformly in each box of an intersecting pair, keep those inside the other box.
         3. Keep samples inside at least two parts that may collide, by the part-wise SDF (< 0).
-        4. loss = sum over kept samples and over the colliding parts containing them of sigmoid(-d_k(x)):
+        4. loss = sum over kept samples and over the colliding parts containing them of sigmoid(-d_k(x) / tau):
            the paper's sigma(f(x)) with f read as positive inside (our SDF is negative inside), so that
-           minimising it pushes the parts apart. Occupancy models (COAP): sum over kept samples of
-           (sum of the colliding parts' occupancies - 0.5), as COAP.
+           minimising it pushes the parts apart. f in metres (tau = 1 m, eq. 5 to the letter) makes the
+           sigmoid nearly flat (slope 0.25 per metre), so the loss reads the SDF in units of tau; the
+           default 1 cm gives the soft occupancy the sharpness of an occupancy network's surface (the
+           shipped COAP's logit changes by 100 per metre across the surface), and one set of optimiser
+           settings then suits both models. Occupancy models (COAP): sum over kept samples of
+           (sum of the colliding parts' occupancies - 0.5), as COAP; tau is not used.
+        Only the parts of overlapping box pairs are encoded (unless the output is encoded already): a
+        sample lies in two parts' boxes, and a part that forms no overlapping pair with the sample's
+        other parts can neither be involved nor be a partner, so the loss and its gradients are those
+        of the full encoding at a fraction of the encoder's cost.
         Returns: loss (B,); with return_points also a list of B tensors (M_b, 3) of kept samples.
         """
-        enc = self.encode(out)
-        B, K = enc.G.shape[:2]
+        if not tau > 0:
+            raise ValueError(f"tau must be > 0 (metres: the SDF scale of the soft occupancy), got {tau}")
+        enc = None if self.training else self._cached(out)
+        G, box_min, box_max = self._frames(out) if enc is None else (enc.G, enc.box_min, enc.box_max)
+        B = G.shape[0]
         mask = self.partition.collision_mask
         with torch.no_grad():
-            overl = boxes_overlap(enc.G, enc.box_min, enc.box_max) & mask
+            overl = boxes_overlap(G, box_min, box_max) & mask
         cands = []
         for b in range(B):
             pairs = torch.triu(overl[b]).nonzero()
-            pts, _ = sample_overlaps(enc.G[b].detach(), enc.box_min[b].detach(), enc.box_max[b].detach(), pairs, n_points, generator)
+            pts, _ = sample_overlaps(G[b].detach(), box_min[b].detach(), box_max[b].detach(), pairs, n_points, generator)
             cands.append(pts)
         M = max([c.shape[0] for c in cands] + [0])
         losses, kept = [], []
         if M == 0:
             zero = out.vertices.sum() * 0  # keeps the graph (and device/dtype)
             return (zero.expand(B).clone(), [c for c in cands]) if return_points else zero.expand(B).clone()
+        if enc is None:  # encode only the parts of overlapping pairs: no other part can be involved (docstring)
+            parts = overl.any(dim=0).any(dim=0).nonzero()[:, 0]
+            enc = self._encode(out, None, parts=parts, frames=(G, box_min, box_max))
+            mask = mask[parts][:, parts]
         far = out.vertices.detach().amax(dim=(0, 1)) + 10.0  # padding point outside every box: no network cost
         padded = far.expand(B, M, 3).clone()
         for b, c in enumerate(cands):
@@ -280,7 +315,7 @@ class Volume(torch.nn.Module):
             n = cands[b].shape[0]
             inv = involved[b, :, :n]
             if self.is_sdf:
-                losses.append((torch.sigmoid(-part[b, :, :n]) * inv).sum())
+                losses.append((torch.sigmoid(-part[b, :, :n] / tau) * inv).sum())
             else:
                 keep = inv.any(dim=0)
                 losses.append(((part[b, :, :n] * inv).sum(dim=0) - self.level)[keep].sum())

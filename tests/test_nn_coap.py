@@ -202,3 +202,18 @@ def test_config_round_trip_and_errors():
     # a net rebuilt from the saved config has the same architecture
     net = CoapNet(5, CoapConfig.from_dict(CoapConfig().to_dict()))
     assert net.num_parameters() == CoapNet(5).num_parameters()
+
+
+def test_part_subset_code_equals_naive_concat():
+    """A code folded for a part subset keeps each part's own one-hot column (naive reference on all parts)."""
+    net = _tiny(K=4)
+    torch.manual_seed(3)
+    z = torch.randn(2, 4, 6, dtype=torch.float64)
+    x = torch.randn(2, 4, 12, 3, dtype=torch.float64) * 0.5
+    parts = torch.tensor([0, 2, 3])
+    code = net.fold(z[:, parts], parts)
+    torch.testing.assert_close(net.decode_dense(x[:, parts], code), _naive(net, x, z)[:, parts])
+    with pytest.raises(ValueError, match="K=3"):
+        net.fold(z, parts)
+    with pytest.raises(ValueError, match="strictly increasing"):
+        net.fold(z[:, :2], torch.tensor([0, 4]))

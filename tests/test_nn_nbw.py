@@ -214,3 +214,21 @@ def test_parameter_count_formula():
 def test_flops_per_pair():
     m = NBWDecoder.from_config(VolumeConfig(), n_parts=1)
     assert m.flops_per_pair() == 2 * (64 * 15 + 4 * 64 * 64 + 64 * 79 + 64)
+
+
+@pytest.mark.parametrize("share", [False, True])
+def test_part_subset_decodes_like_the_naive_decoder(share):
+    """Weights generated for a part subset decode each subset part exactly like the naive reference."""
+    m = _tiny(K=4, share=share)
+    z = torch.randn(2, 4, 5, dtype=torch.float64)
+    parts = torch.tensor([1, 3])
+    gen = m.generate(z[:, parts], parts)
+    assert gen.batch_shape == (2, 2) and torch.equal(gen.parts, parts)
+    x = torch.randn(2, 2, 7, 3, dtype=torch.float64)
+    full = m.blended_weights(z)
+    ref = _naive_decoder(m, [W[:, parts] for W in full], x, z[:, parts])
+    torch.testing.assert_close(m.decode_dense(x, gen), ref)
+    with pytest.raises(ValueError, match="strictly increasing"):
+        m.generate(z[:, :2], torch.tensor([3, 1]))
+    with pytest.raises(ValueError, match="K=2"):
+        m.generate(z, parts)

@@ -160,18 +160,23 @@ def test_cli_without_checkpoint_stops_with_attach_volume_message(tmp_path, capsy
 
 class _StubVolume(torch.nn.Module):
     """selfpen_loss = sum of the left wrist's height; 'penetration points' for the first k calls
-    (or, with `pattern`, call i finds pattern[i] points, 0 after the pattern ends)."""
+    (or, with `pattern`, call i finds pattern[i] points, 0 after the pattern ends); with `values`,
+    call i returns values[i] (plus 0 * the wrist height) instead."""
 
-    def __init__(self, k: int = 0, pattern=None):
+    def __init__(self, k: int = 0, pattern=None, values=None):
         super().__init__()
         self.w = torch.nn.Parameter(torch.ones(1))
         self.pattern = pattern if pattern is not None else [5] * k
+        self.values = values
         self.calls = 0
 
-    def selfpen_loss(self, out, n_points=300, generator=None, return_points=False):
+    def selfpen_loss(self, out, n_points=300, generator=None, return_points=False, tau=1.0):
         n = self.pattern[self.calls] if self.calls < len(self.pattern) else 0
+        h = out.joints[:, 20, 1] * self.w
+        if self.values is not None:
+            h = h * 0 + self.values[self.calls]
         self.calls += 1
-        return out.joints[:, 20, 1] * self.w, [torch.zeros(n, 3)]
+        return h, [torch.zeros(n, 3)]
 
 
 def test_repair_loop_stops_when_no_points_remain(body):
@@ -186,6 +191,20 @@ def test_repair_loop_stops_when_no_points_remain(body):
         assert wrist(r.body_pose) < wrist(case.body_pose) - 1e-3  # moved down the loss gradient
     r2 = repair_case(body, _StubVolume(k=100), case, SelfPenConfig(lr=0.05, w_selfpen=0.1, max_iters=4))
     assert r2.status == "max_iters" and r2.iterations == 4
+
+
+def test_repair_stops_when_the_penetration_term_stalls(body):
+    case = C.load_cases(names=["hands_through_thighs"])[0]
+    values = [3.0, 2.0, 2.5, 2.2, 2.1, 1.0, 0.5]
+    r = repair_case(body, _StubVolume(k=100, values=values), case, SelfPenConfig(lr=0.01, w_selfpen=1.0, patience=3))
+    # lows at evaluations 0 and 1; evaluations 2, 3, 4 bring none: stop before the 5th step
+    assert r.status == "stalled" and r.iterations == 4 and len(r.points) == 5
+    r = repair_case(body, _StubVolume(k=6, values=values + [0.0]), case, SelfPenConfig(lr=0.01, w_selfpen=1.0, patience=0, stop_checks=1))
+    assert r.status == "resolved" and r.iterations == 6  # patience 0: no stall rule (the paper's loop)
+    with pytest.raises(ValueError, match="patience"):
+        SelfPenConfig(patience=-1)
+    with pytest.raises(ValueError, match="tau"):
+        SelfPenConfig(tau=0.0)
 
 
 def test_repair_stop_checks_redraw_before_stopping(body):

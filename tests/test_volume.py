@@ -386,3 +386,29 @@ def test_normalized_model_gradients_match_finite_differences(tiny_config):
 
     args = (p["body_pose"].clone().requires_grad_(), p["betas"].clone().requires_grad_(), pts.clone().requires_grad_())
     assert torch.autograd.gradcheck(lambda *a: f(*a)[:, :8], args, eps=1e-6, atol=1e-5, rtol=1e-3)
+
+
+@pytest.mark.needs_checkpoint
+@pytest.mark.parametrize("model", ["volsmpl", "coap"])
+def test_selfpen_encodes_only_overlapping_parts_with_full_values_and_gradients(model):
+    """The self-penetration loss encodes the parts of overlapping box pairs only; loss and pose gradient
+    equal those of the full encoding (an output encoded beforehand takes the all-parts path)."""
+    b = volsmpl.create_body()
+    vol = volsmpl.attach_volume(b, model=model)
+    from volsmpl.apps.selfpen.cases import load_cases
+    case = load_cases(names=["knee_into_chest"])[0]
+    encoded = []
+    enc = vol.net.encode
+    vol.net.encode = lambda local, *a: encoded.append(local.shape[1]) or enc(local, *a)
+    res = []
+    for full in (False, True):
+        pose = case.body_pose[None].clone().requires_grad_(True)
+        out = b(betas=case.betas[None], global_orient=case.global_orient[None], body_pose=pose)
+        if full:
+            vol.encode(out)
+        loss = vol.selfpen_loss(out, generator=torch.Generator().manual_seed(0))[0]
+        res.append((loss.detach(), torch.autograd.grad(loss, pose)[0]))
+    assert encoded[0] < vol.num_parts and encoded[1] == vol.num_parts
+    assert float(res[0][0]) > 0 and res[0][1].abs().sum() > 0
+    torch.testing.assert_close(res[0][0], res[1][0], rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(res[0][1], res[1][1], rtol=1e-4, atol=1e-6)

@@ -45,6 +45,10 @@ def add_parser(sub):
     p.add_argument("--n-points", type=int, default=d.n_points, help=f"samples per box of a colliding pair (paper {d.n_points})")
     p.add_argument("--stop-checks", type=int, default=None,
                    help=f"stop when so many point draws in a row find no penetration (tuned {d.stop_checks}, paper 1)")
+    p.add_argument("--tau", type=float, default=None,
+                   help=f"metres: SDF scale of VolumetricSMPL's soft occupancy in the loss (tuned {d.tau:g}, paper 1)")
+    p.add_argument("--patience", type=int, default=None,
+                   help=f"stop after so many steps without a new lowest penetration term (tuned {d.patience}, paper 0: off)")
     p.add_argument("--seed", type=int, default=d.seed, help="seed of the point sampler")
     p.add_argument("--device", default=d.device, choices=["cpu", "cuda"])
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
@@ -97,7 +101,7 @@ def run(args) -> int:
 
     models = parse_models(args.model)
     ckpts = _checkpoints(args, models)
-    given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks") if getattr(args, k) is not None}
+    given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks", "tau", "patience") if getattr(args, k) is not None}
     cfg = SelfPenConfig.preset(args.preset, max_iters=args.max_iters, n_points=args.n_points, seed=args.seed,
                                device=args.device, **given)
     if cfg.device == "cuda" and not torch.cuda.is_available():

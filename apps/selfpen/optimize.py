@@ -8,7 +8,9 @@ For one body (betas, global_orient, body_pose theta_0) minimise over the body po
 with SGD, at most `max_iters` steps, stopping as soon as the self-penetration loss samples no
 point inside two colliding parts (the list of points returned by `Volume.selfpen_loss` is empty)
 in `stop_checks` independent draws in a row (the paper stops on the first empty draw: 1; a draw
-that finds points again is the one the next step uses, so re-checks never cost a step).
+that finds points again is the one the next step uses, so re-checks never cost a step), or when
+the self-penetration term has found no new low in `patience` steps (an equilibrium with the prior:
+the paper has no such rule and runs on to the cap; patience 0 does the same).
 Defaults are the values of our tuning run (PRESETS; the paper's are a preset). The repair is measured with the exact
 triangle-collision metric (`triangles.body_collisions`) before and after, and by the geodesic
 change of each joint's rotation.
@@ -38,8 +40,8 @@ PAPER = {
 # empty draw) and the values of our one tuning run for both models (apps/selfpen/tune.py, docs/selfpen_tune.json):
 # the paper's lr * w_prior (1e-2) kept, lr * w_selfpen raised from 1e-6 (no pose change on our body) to 0.1.
 PRESETS = {
-    "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1},
-    "tuned": {"lr": 1e-2, "w_selfpen": 10.0, "w_prior": 1.0, "stop_checks": 3},
+    "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1, "tau": 1.0, "patience": 0},
+    "tuned": {"lr": 1e-2, "w_selfpen": 10.0, "w_prior": 1.0, "stop_checks": 3, "tau": 1.0, "patience": 0},
 }
 
 
@@ -54,6 +56,8 @@ class SelfPenConfig:
     w_prior: float = PRESETS["tuned"]["w_prior"]
     n_points: int = 300
     stop_checks: int = PRESETS["tuned"]["stop_checks"]  # empty draws in a row that stop the loop (paper: 1)
+    tau: float = PRESETS["tuned"]["tau"]  # metres: SDF scale of the loss's soft occupancy (Volume.selfpen_loss; paper 1)
+    patience: int = PRESETS["tuned"]["patience"]  # stop after so many steps without a new lowest penetration term (0: off)
     seed: int = 0  # seeds the point sampler of every case
     device: str = "cpu"
 
@@ -72,6 +76,10 @@ class SelfPenConfig:
             raise ValueError(f"loss weights must be >= 0, got w_selfpen={self.w_selfpen}, w_prior={self.w_prior}")
         if self.n_points < 1:
             raise ValueError(f"n_points must be >= 1, got {self.n_points}")
+        if not self.tau > 0:
+            raise ValueError(f"tau must be > 0 metres, got {self.tau}")
+        if self.patience < 0:
+            raise ValueError(f"patience must be >= 0 (0 turns the stall stop off), got {self.patience}")
         if self.stop_checks < 1:
             raise ValueError(f"stop_checks must be >= 1 (draws that must all be empty to stop), got {self.stop_checks}")
 
@@ -80,7 +88,8 @@ class SelfPenConfig:
 class RepairResult:
     """Outcome of one case. status: 'no_intersection' (no triangle collision: left unchanged),
     'no_volume_points' (the volume finds no penetration: left unchanged), 'resolved' (the volume
-    finds no penetration after `iterations` steps) or 'max_iters'."""
+    finds no penetration after `iterations` steps), 'stalled' (the penetration term found no new low for
+    `patience` steps) or 'max_iters'."""
 
     name: str
     status: str
@@ -224,6 +233,7 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
     for p in volume.parameters():
         p.requires_grad_(False)  # only the pose is optimised
     res.status = "max_iters"
+    best_pen, since_best = float("inf"), 0
     try:
         with _Memory(dev) as mem:
             _sync(dev)
@@ -232,7 +242,8 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
                 t0 = time.perf_counter()
                 out = body(betas=betas, global_orient=orient, body_pose=theta)
                 for _ in range(cfg.stop_checks):  # re-draw while empty, up to stop_checks draws
-                    sp, pts = volume.selfpen_loss(out, n_points=cfg.n_points, generator=gen, return_points=True)
+                    sp, pts = volume.selfpen_loss(out, n_points=cfg.n_points, generator=gen, return_points=True,
+                                                  tau=cfg.tau)
                     res.points.append(int(pts[0].shape[0]))
                     if pts[0].shape[0] > 0:
                         break
@@ -240,6 +251,14 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
                     res.status = "no_volume_points" if it == 0 else "resolved"
                     break
                 if it == cfg.max_iters:
+                    break
+                pen = float(sp[0].detach())
+                if pen < best_pen:
+                    best_pen, since_best = pen, 0
+                else:
+                    since_best += 1
+                if cfg.patience and since_best >= cfg.patience:
+                    res.status = "stalled"
                     break
                 loss = cfg.w_selfpen * sp[0] + cfg.w_prior * ((theta - theta0) ** 2).sum()
                 opt.zero_grad(set_to_none=True)

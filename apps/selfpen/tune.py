@@ -120,6 +120,8 @@ def main(argv=None) -> int:
     p.add_argument("--w-prior", type=float, nargs="+", default=list(GRID_W_PRIOR))
     p.add_argument("--max-iters", type=int, default=SelfPenConfig.max_iters)
     p.add_argument("--stop-checks", type=int, default=SelfPenConfig.stop_checks)
+    p.add_argument("--tau", type=float, default=SelfPenConfig.tau)
+    p.add_argument("--patience", type=int, default=SelfPenConfig.patience)
     p.add_argument("--threads", type=int, default=None)
     p.add_argument("--out", default="out/selfpen_tune.json")
     p.add_argument("--combine", nargs="+", default=None, metavar="JSON",
@@ -140,7 +142,7 @@ def main(argv=None) -> int:
     volumes = {m: volsmpl.attach_volume(body, checkpoint=ck[m], model=m) for m in models}
     names = None if a.cases == "all" else [n.strip() for n in a.cases.split(",") if n.strip()]
     cases = load_cases(names=names)
-    base = SelfPenConfig(max_iters=a.max_iters, stop_checks=a.stop_checks)
+    base = SelfPenConfig(max_iters=a.max_iters, stop_checks=a.stop_checks, tau=a.tau, patience=a.patience)
     result = tune(body, volumes, cases, grid_configs(base, a.lr, a.w_selfpen, a.w_prior))
     result["checkpoints"] = {m: str(ck[m] or "shipped") for m in models}
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)

@@ -48,7 +48,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from .config import JsonConfig
-from .nbw import check_pairs, count_parameters
+from .nbw import check_pairs, check_part_subset, count_parameters
 from .pointnet import ResnetPointNet
 
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)
@@ -133,9 +133,11 @@ class CoapCode(NamedTuple):
         biases: one tensor per query-encoder layer that reads the input u (layer 0, then the skip
             layers in order), (B, K, out_l) = b + s (W_hot[:, k] + W_z z_k); the inside flag is
             NOT folded in (added per call: 1 for pairs, per point on the dense path).
+        parts: None for all K parts; else (K',) int64 ids of the part subset the code is for.
     """
     z: torch.Tensor
     biases: Tuple[torch.Tensor, ...]
+    parts: Optional[torch.Tensor] = None
 
 
 def _igr_shapes(d_in: int, dims: Sequence[int], d_out: int, skips: Sequence[int]) -> List[Tuple[int, int]]:
@@ -221,15 +223,16 @@ class CoapNet(nn.Module):
         lin = self.query_layers[l]
         return 3 if l == 0 else lin.in_features - self.query_in + 3
 
-    def fold(self, z: torch.Tensor) -> CoapCode:
+    def fold(self, z: torch.Tensor, parts: Optional[torch.Tensor] = None) -> CoapCode:
         """Per-(body, part) folded biases of the input-reading query layers.
 
         Args:
-            z: (B, K, latent) part codes.
+            z: (B, K, latent) part codes; with parts (K',) int64 ids, (B, K', latent) codes of those parts.
         Returns:
             :class:`CoapCode` with biases (B, K, out_l) = b + s (W_hot[:, k] + W_z z_k).
         """
-        K, L = self.num_parts, self.config.latent_dim
+        L = self.config.latent_dim
+        K = self.num_parts if parts is None else check_part_subset(parts, self.num_parts)
         if z.dim() != 3 or z.shape[1] != K or z.shape[2] != L:
             raise ValueError(f"CoapNet expects part codes z of shape (B, K={K}, {L}), got {tuple(z.shape)}")
         biases = []
@@ -237,16 +240,21 @@ class CoapNet(nn.Module):
             if not self._reads_input(l):
                 continue
             c = self._pt_cols(l) + 1                               # first one-hot column
-            W_hot = lin.weight[:, c:c + K]                          # (out, K)
-            W_z = lin.weight[:, c + K:]                             # (out, latent)
+            W_hot = lin.weight[:, c:c + self.num_parts]             # (out, K)
+            if parts is not None:
+                W_hot = W_hot[:, parts]
+            W_z = lin.weight[:, c + self.num_parts:]                # (out, latent)
             s = self._scale(l)
             biases.append(lin.bias + s * (W_hot.t() + z @ W_z.t()))  # (B, K, out)
-        return CoapCode(z, tuple(biases))
+        return CoapCode(z, tuple(biases), parts)
 
-    def encode(self, local_surface: torch.Tensor) -> CoapCode:
-        """local_surface (B, K, P, 3) part surface samples in part frames -> CoapCode."""
-        if local_surface.dim() != 4 or local_surface.shape[1] != self.num_parts or local_surface.shape[-1] != 3:
-            raise ValueError(f"CoapNet.encode expects local_surface of shape (B, K={self.num_parts}, P, 3), "
+    def encode(self, local_surface: torch.Tensor, parts: Optional[torch.Tensor] = None) -> CoapCode:
+        """local_surface (B, K, P, 3) part surface samples in part frames -> CoapCode.
+
+        parts: (K',) int64 ids when local_surface holds only those parts (B, K', P, 3)."""
+        K = self.num_parts if parts is None else check_part_subset(parts, self.num_parts)
+        if local_surface.dim() != 4 or local_surface.shape[1] != K or local_surface.shape[-1] != 3:
+            raise ValueError(f"CoapNet.encode expects local_surface of shape (B, K={K}, P, 3), "
                              f"got {tuple(local_surface.shape)}")
         B, K, P, _ = local_surface.shape
         x = local_surface.reshape(B * K, P, 3)
@@ -254,7 +262,7 @@ class CoapNet(nn.Module):
                             enabled=self.encoder_bf16 and x.dtype == torch.float32):
             z = self.encoder(x)
         z = z.to(local_surface.dtype).reshape(B, K, -1)
-        return self.fold(z)
+        return self.fold(z, parts)
 
     # ------------------------------------------------------------------ decoding core
     def _check_code(self, code: CoapCode) -> Tuple[int, int]:
@@ -262,8 +270,10 @@ class CoapNet(nn.Module):
         if not isinstance(code, CoapCode) or len(code.biases) != n_in:
             raise TypeError("CoapNet decoding expects the CoapCode returned by CoapNet.encode/fold of this model")
         B, K = code.z.shape[:2]
-        if K != self.num_parts:
-            raise ValueError(f"the code is for K={K} parts, this network has K={self.num_parts}")
+        expect = self.num_parts if code.parts is None else len(code.parts)
+        if K != expect:
+            raise ValueError(f"the code is for K={K} parts, expected {expect} "
+                             f"({'this network' if code.parts is None else 'the part subset'})")
         return B, K
 
     def _tables(self, code: CoapCode, with_flag_column: bool) -> List[torch.Tensor]:

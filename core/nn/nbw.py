@@ -37,6 +37,15 @@ from torch import nn
 from .posenc import positional_encoding, posenc_dim
 
 
+def check_part_subset(parts: torch.Tensor, n_parts: int) -> int:
+    """Validate a part subset: (K',) int64 ids, strictly increasing, in [0, n_parts). Returns K'."""
+    if not torch.is_tensor(parts) or parts.dim() != 1 or parts.dtype != torch.int64:
+        raise ValueError(f"parts must be a 1-D int64 tensor of part ids, got {parts!r}")
+    if parts.numel() and (int(parts.min()) < 0 or int(parts.max()) >= n_parts or bool((parts[1:] <= parts[:-1]).any())):
+        raise ValueError(f"parts must be strictly increasing ids in [0, {n_parts}), got {parts.tolist()}")
+    return parts.numel()
+
+
 class NBWWeights(NamedTuple):
     """Generated decoder weights for B bodies x K parts, latent already folded into the biases.
 
@@ -44,9 +53,12 @@ class NBWWeights(NamedTuple):
         weights: one tensor per layer l, (B, K, out_l, in_pt_l), where in_pt_l counts only the
             per-point input columns (gamma(x) for layer 0, [h, gamma(x)] for skip layers, h otherwise).
         biases: one tensor per layer l, (B, K, out_l) = b^l + W_z z_k (just b^l on layers without z).
+        parts: None for all K parts of the body; else (K',) int64 ids of the parts these weights are for
+            (a part subset: decoding then indexes parts 0..K'-1 of this subset).
     """
     weights: Tuple[torch.Tensor, ...]
     biases: Tuple[torch.Tensor, ...]
+    parts: Optional[torch.Tensor] = None
 
     @property
     def batch_shape(self) -> Tuple[int, int]:
@@ -216,45 +228,49 @@ class NBWDecoder(nn.Module):
                    pe_levels=cfg.pe_levels, rank=cfg.nbw_rank, **kwargs)
 
     # ------------------------------------------------------------------ generation
-    def _check_z(self, z: torch.Tensor) -> None:
-        if z.dim() != 3 or z.shape[1] != self.n_parts or z.shape[2] != self.latent_dim:
-            raise ValueError(f"NBWDecoder expects latent codes z of shape (B, K={self.n_parts}, "
+    def _check_z(self, z: torch.Tensor, parts: Optional[torch.Tensor] = None) -> None:
+        K = self.n_parts if parts is None else check_part_subset(parts, self.n_parts)
+        if z.dim() != 3 or z.shape[1] != K or z.shape[2] != self.latent_dim:
+            raise ValueError(f"NBWDecoder expects latent codes z of shape (B, K={K}, "
                              f"{self.latent_dim}), got {tuple(z.shape)}")
 
-    def blended_weights(self, z: torch.Tensor) -> Tuple[torch.Tensor, ...]:
+    def blended_weights(self, z: torch.Tensor, parts: Optional[torch.Tensor] = None) -> Tuple[torch.Tensor, ...]:
         """Full blended weights W_k^l = W^l + sum_r v_k^l[r] S_k^l[r] (latent columns included).
 
         Args:
-            z: (B, K, latent_dim).
+            z: (B, K, latent_dim); with parts, (B, K', latent_dim) codes of those K' parts.
         Returns:
             tuple over layers of (B, K, out_l, in_l); input columns ordered
             [gamma(x), z] on layer 0, [h, gamma(x), z] on skip layers, [h] otherwise.
         """
-        self._check_z(z)
+        self._check_z(z, parts)
         out = []
         for l in range(self.n_layers):
             W = self.base_weight[l]
             if self.rank == 0:
-                out.append(W.expand(z.shape[0], self.n_parts, *W.shape))
+                out.append(W.expand(z.shape[0], z.shape[1], *W.shape))
                 continue
             v = self.blend[l](z)                                        # (B, K, R)
             S = self.shape_weight[l].flatten(2)                         # (S, R, o*i)
             if self.share_shapes:
                 delta = v @ S[0]                                        # (B, K, o*i)
             else:                                                       # batched over k
+                if parts is not None:
+                    S = S[parts]
                 delta = torch.bmm(v.transpose(0, 1), S).transpose(0, 1)  # (B, K, o*i)
             out.append(W + delta.view(*z.shape[:2], *W.shape))
         return tuple(out)
 
-    def generate(self, z: torch.Tensor) -> NBWWeights:
+    def generate(self, z: torch.Tensor, parts: Optional[torch.Tensor] = None) -> NBWWeights:
         """Generate per-(body, part) decoder weights with the latent folded into the biases.
 
         Args:
-            z: (B, K, latent_dim) part codes.
+            z: (B, K, latent_dim) part codes; with parts (K',) int64 part ids, the codes of those parts only
+                (B, K', latent_dim): the weights are then for that subset (cheap partial re-encoding).
         Returns:
             :class:`NBWWeights` (weights (B, K, out_l, in_pt_l), biases (B, K, out_l)).
         """
-        full = self.blended_weights(z)
+        full = self.blended_weights(z, parts)
         weights, biases = [], []
         for l, W in enumerate(full):
             b = self.base_bias[l]
@@ -267,14 +283,16 @@ class NBWDecoder(nn.Module):
                 b = b.expand(*z.shape[:2], b.shape[0])
             weights.append(W)
             biases.append(b)
-        return NBWWeights(tuple(weights), tuple(biases))
+        return NBWWeights(tuple(weights), tuple(biases), parts)
 
     def _check_gen(self, gen: NBWWeights) -> Tuple[int, int]:
         if not isinstance(gen, NBWWeights) or len(gen.weights) != self.n_layers:
             raise TypeError("decode expects the NBWWeights returned by NBWDecoder.generate(z) of this model")
         B, K = gen.batch_shape
-        if K != self.n_parts:
-            raise ValueError(f"generated weights are for K={K} parts, this decoder has K={self.n_parts}")
+        expect = self.n_parts if gen.parts is None else len(gen.parts)
+        if K != expect:
+            raise ValueError(f"generated weights are for K={K} parts, expected {expect} "
+                             f"({'this decoder' if gen.parts is None else 'the part subset'})")
         return B, K
 
     # ------------------------------------------------------------------ decoding
