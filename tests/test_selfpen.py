@@ -201,6 +201,12 @@ def test_repair_stops_when_the_penetration_term_stalls(body):
     assert r.status == "stalled" and r.iterations == 4 and len(r.points) == 5
     r = repair_case(body, _StubVolume(k=6, values=values + [0.0]), case, SelfPenConfig(lr=0.01, w_selfpen=1.0, patience=0, stop_checks=1))
     assert r.status == "resolved" and r.iterations == 6  # patience 0: no stall rule (the paper's loop)
+    # lows within stall_rtol of the best are noise: 2.8, 2.75, 2.7 are no new low after 3.0 at rtol 0.1
+    r = repair_case(body, _StubVolume(k=100, values=[3.0, 2.8, 2.75, 2.7, 1.0]), case,
+                    SelfPenConfig(lr=0.01, w_selfpen=1.0, patience=3, stall_rtol=0.1))
+    assert r.status == "stalled" and r.iterations == 3
+    with pytest.raises(ValueError, match="stall_rtol"):
+        SelfPenConfig(stall_rtol=1.0)
     with pytest.raises(ValueError, match="patience"):
         SelfPenConfig(patience=-1)
     with pytest.raises(ValueError, match="tau"):
@@ -284,7 +290,7 @@ def test_presets():
     p = SelfPenConfig.preset("paper")
     assert (p.lr, p.w_selfpen, p.w_prior, p.stop_checks, p.tau, p.patience) == (1e-5, 0.1, 1e3, 1, 1.0, 0)
     t = SelfPenConfig()
-    assert (t.lr, t.w_selfpen, t.w_prior, t.stop_checks, t.tau, t.patience, t.code_grad) == (1e-2, 0.3, 1.0, 3, 0.01, 10, False)
+    assert (t.lr, t.w_selfpen, t.w_prior, t.stop_checks, t.tau, t.patience, t.code_grad, t.stall_rtol, t.max_step) == (1e-2, 10.0, 1.0, 3, 0.01, 10, False, 0.1, 0.1)
     assert p.code_grad
     assert t.lr * t.w_prior == pytest.approx(p.lr * p.w_prior)  # the tuning kept the paper's prior step
     assert SelfPenConfig.preset("paper", lr=1e-3).lr == 1e-3
@@ -299,3 +305,16 @@ def test_summary_removed_per_second_by_hand():
     s = summarize(rs)
     assert s["removed_per_s"] == pytest.approx((60 - 20) / 2.0)  # case c has no collisions: not counted
     assert s["cases_with_collisions"] == 2 and s["total_s"] == pytest.approx(1.0)
+
+
+def test_clip_joint_step_by_hand():
+    from volsmpl.apps.selfpen.optimize import clip_joint_step
+    g = torch.zeros(69)
+    g[3:6] = torch.tensor([30.0, 40.0, 0.0])  # joint 1: lr * |g| = 0.5 rad
+    g[9] = 10.0                                # joint 3: 0.1 rad
+    f = clip_joint_step(g, lr=0.01, max_step=0.2)
+    assert f == pytest.approx(0.4) and float((0.01 * g[3:6]).norm()) == pytest.approx(0.2)
+    assert float(g[9]) == pytest.approx(4.0)  # the whole step scaled: direction kept
+    assert clip_joint_step(g, lr=0.01, max_step=1.0) == 1.0 and float(g[9]) == pytest.approx(4.0)
+    with pytest.raises(ValueError, match="max_step"):
+        SelfPenConfig(max_step=-0.1)

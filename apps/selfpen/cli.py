@@ -49,6 +49,10 @@ def add_parser(sub):
                    help=f"metres: SDF scale of VolumetricSMPL's soft occupancy in the loss (tuned {d.tau:g}, paper 1)")
     p.add_argument("--patience", type=int, default=None,
                    help=f"stop after so many steps without a new lowest penetration term (tuned {d.patience}, paper 0: off)")
+    p.add_argument("--stall-rtol", type=float, default=None,
+                   help=f"a new low of the penetration term must beat the best by this fraction (tuned {d.stall_rtol:g})")
+    p.add_argument("--max-step", type=float, default=None,
+                   help=f"radians: longest rotation step of one joint per iteration (tuned {d.max_step:g}, paper 0: plain SGD)")
     p.add_argument("--code-grad", default=None, choices=["on", "off"],
                    help="back-propagate through the part codes (tuned off: rigid part motion only; paper on)")
     p.add_argument("--seed", type=int, default=d.seed, help="seed of the point sampler")
@@ -103,7 +107,7 @@ def run(args) -> int:
 
     models = parse_models(args.model)
     ckpts = _checkpoints(args, models)
-    given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks", "tau", "patience") if getattr(args, k) is not None}
+    given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks", "tau", "patience", "stall_rtol", "max_step") if getattr(args, k) is not None}
     if args.code_grad is not None:
         given["code_grad"] = args.code_grad == "on"
     cfg = SelfPenConfig.preset(args.preset, max_iters=args.max_iters, n_points=args.n_points, seed=args.seed,

@@ -9,7 +9,8 @@ with SGD, at most `max_iters` steps, stopping as soon as the self-penetration lo
 point inside two colliding parts (the list of points returned by `Volume.selfpen_loss` is empty)
 in `stop_checks` independent draws in a row (the paper stops on the first empty draw: 1; a draw
 that finds points again is the one the next step uses, so re-checks never cost a step), or when
-the self-penetration term has found no new low in `patience` steps (an equilibrium with the prior:
+the self-penetration term has found no new low (by more than `stall_rtol`, the sampling noise of one
+draw) in `patience` steps (an equilibrium with the prior:
 the paper has no such rule and runs on to the cap; patience 0 does the same).
 Defaults are the values of our tuning run (PRESETS; the paper's are a preset). The repair is measured with the exact
 triangle-collision metric (`triangles.body_collisions`) before and after, and by the geodesic
@@ -37,15 +38,17 @@ PAPER = {
 
 
 # The paper's values (Sec. 5.2.4: lr 1e-5, pose-prior weight 1e3, self-penetration weight 0.1, stop on the first
-# empty draw, the SDF read in metres: tau 1) and the values of our one tuning run for both models
+# empty draw, the SDF read in metres: tau 1, plain SGD) and the values of our one tuning run for both models
 # (apps/selfpen/tune.py, all 17 cases, docs/selfpen_tune.json): the paper's lr * w_prior (1e-2) kept, the SDF read in
-# centimetres (tau 1 cm: the sharpness of COAP's occupancy), lr * w_selfpen 3e-3 (the best of 3e-4 .. 1e-2 for both
-# models), 3 empty draws to stop, and a stall stop after 10 steps without a new low. The tuned preset also skips the
-# backward pass through the part encoder (code_grad False, Volume.selfpen_loss), for both models alike.
+# centimetres (tau 1 cm: the sharpness of COAP's occupancy), every step limited to 0.1 rad per joint (plain SGD flung
+# bodies: one step could move the spine by tens of degrees), lr * w_selfpen 0.1 (the best mean of 1e-3 .. 0.3 for both
+# models), 3 empty draws to stop, a stall stop after 10 steps without a new low (10 % below the best), and no backward
+# pass through the part encoder (code_grad False, Volume.selfpen_loss), all for both models alike.
 PRESETS = {
-    "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1, "tau": 1.0, "patience": 0, "code_grad": True},
-    "tuned": {"lr": 1e-2, "w_selfpen": 0.3, "w_prior": 1.0, "stop_checks": 3, "tau": 0.01, "patience": 10,
-              "code_grad": False},
+    "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1, "tau": 1.0, "patience": 0, "stall_rtol": 0.0,
+              "code_grad": True, "max_step": 0.0},
+    "tuned": {"lr": 1e-2, "w_selfpen": 10.0, "w_prior": 1.0, "stop_checks": 3, "tau": 0.01, "patience": 10,
+              "stall_rtol": 0.1, "code_grad": False, "max_step": 0.1},
 }
 
 
@@ -62,6 +65,11 @@ class SelfPenConfig:
     stop_checks: int = PRESETS["tuned"]["stop_checks"]  # empty draws in a row that stop the loop (paper: 1)
     tau: float = PRESETS["tuned"]["tau"]  # metres: SDF scale of the loss's soft occupancy (Volume.selfpen_loss; paper 1)
     patience: int = PRESETS["tuned"]["patience"]  # stop after so many steps without a new lowest penetration term (0: off)
+    # a new low must beat the best by this fraction: one point draw's penetration term varies by ~14 % (relative std,
+    # median over the 17 cases, both models), so smaller "lows" are sampling noise, not progress
+    stall_rtol: float = PRESETS["tuned"]["stall_rtol"]
+    # radians: longest step of one joint's rotation per iteration (the gradient is scaled to it; 0: plain SGD)
+    max_step: float = PRESETS["tuned"]["max_step"]
     code_grad: bool = PRESETS["tuned"]["code_grad"]  # back-propagate through the part codes (Volume.selfpen_loss)
     seed: int = 0  # seeds the point sampler of every case
     device: str = "cpu"
@@ -83,6 +91,10 @@ class SelfPenConfig:
             raise ValueError(f"n_points must be >= 1, got {self.n_points}")
         if not self.tau > 0:
             raise ValueError(f"tau must be > 0 metres, got {self.tau}")
+        if self.max_step < 0:
+            raise ValueError(f"max_step must be >= 0 radians (0: no limit), got {self.max_step}")
+        if not 0.0 <= self.stall_rtol < 1.0:
+            raise ValueError(f"stall_rtol must be in [0, 1), got {self.stall_rtol}")
         if self.patience < 0:
             raise ValueError(f"patience must be >= 0 (0 turns the stall stop off), got {self.patience}")
         if self.stop_checks < 1:
@@ -258,7 +270,7 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
                 if it == cfg.max_iters:
                     break
                 pen = float(sp[0].detach())
-                if pen < best_pen:
+                if pen < best_pen * (1.0 - cfg.stall_rtol):
                     best_pen, since_best = pen, 0
                 else:
                     since_best += 1
@@ -268,6 +280,8 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
                 loss = cfg.w_selfpen * sp[0] + cfg.w_prior * ((theta - theta0) ** 2).sum()
                 opt.zero_grad(set_to_none=True)
                 loss.backward()
+                if cfg.max_step:
+                    clip_joint_step(theta.grad, cfg.lr, cfg.max_step)
                 opt.step()
                 _sync(dev)
                 res.step_ms.append((time.perf_counter() - t0) * 1e3)
@@ -283,6 +297,17 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
     if not torch.isfinite(pose).all():
         raise RuntimeError(f"case {case.name!r}: the pose became NaN/Inf during optimisation; lower --lr")
     return pose
+
+
+def clip_joint_step(grad: torch.Tensor, lr: float, max_step: float) -> float:
+    """Scale the pose gradient (..., 23*3) in place so that no joint's SGD step lr * grad_j (axis-angle, 3 values)
+    is longer than max_step radians; returns the factor (1 when no joint exceeds it). The whole gradient is
+    scaled, so the step keeps its direction (a trust region, not per-joint clipping)."""
+    longest = float((lr * grad.detach().reshape(-1, 3)).norm(dim=-1).max())
+    factor = min(1.0, max_step / longest) if longest > 0 else 1.0
+    if factor < 1.0:
+        grad.mul_(factor)
+    return factor
 
 
 def summarize(results: list[RepairResult]) -> dict:

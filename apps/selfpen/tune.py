@@ -5,8 +5,9 @@ The paper's values (lr 1e-5, pose-prior weight 1e3, self-penetration weight 0.1)
 COAP's SMPL-X code; with plain SGD only the products lr * w_selfpen and lr * w_prior matter, and
 the prior step is stable only for lr * w_prior < 1. The default grid keeps the paper's
 lr * w_prior = 1e-2 (lr 1e-2, w_prior 1) and raises the paper's lr * w_selfpen = 1e-6, which does
-not move our bodies, to 3e-4 .. 1e-2 (w_selfpen 0.03, 0.1, 0.3, 1), with VolumetricSMPL's SDF read
-in centimetres (tau 1 cm, Volume.selfpen_loss) so that both models' losses have the same scale. Each grid point repairs the same
+not move our bodies, to 1e-3 .. 0.3 (w_selfpen 0.1 .. 30), with VolumetricSMPL's SDF read in
+centimetres (tau 1 cm, Volume.selfpen_loss) so that both models' losses have the same scale, and
+every step limited to 0.1 rad per joint (SelfPenConfig.max_step); the other settings are the tuned preset's. Each grid point repairs the same
 cases with each model; the table gives, per model and grid point, the mean fraction of triangle
 collisions removed, the mean iterations and the mean pose change. Selection rule (`best`): the grid
 point with the largest fraction removed averaged over the models, ties broken by the smaller pose
@@ -32,7 +33,7 @@ from .optimize import SelfPenConfig, repair_case, summarize
 
 # default grid: learning rate and the two weights (w_selfpen, w_prior); module docstring
 GRID_LR = (1e-2,)
-GRID_W_SELFPEN = (0.03, 0.1, 0.3, 1.0)
+GRID_W_SELFPEN = (0.1, 0.3, 1.0, 3.0, 10.0, 30.0)
 GRID_W_PRIOR = (1.0,)
 
 
@@ -143,7 +144,7 @@ def main(argv=None) -> int:
     volumes = {m: volsmpl.attach_volume(body, checkpoint=ck[m], model=m) for m in models}
     names = None if a.cases == "all" else [n.strip() for n in a.cases.split(",") if n.strip()]
     cases = load_cases(names=names)
-    base = SelfPenConfig(max_iters=a.max_iters, stop_checks=a.stop_checks, tau=a.tau, patience=a.patience)
+    base = SelfPenConfig(max_iters=a.max_iters, stop_checks=a.stop_checks, tau=a.tau, patience=a.patience)  # rest: tuned
     result = tune(body, volumes, cases, grid_configs(base, a.lr, a.w_selfpen, a.w_prior))
     result["checkpoints"] = {m: str(ck[m] or "shipped") for m in models}
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
