@@ -24,13 +24,16 @@ Weight averaging (`ema_decay` > 0): the checkpoints publish an exponential movin
 the model (what eval and shipping read) and keep the optimised weights beside it for --resume. A fine-tuning
 phase starts from a model checkpoint (--init) and anneals from `lr` at step `anneal_start` to `lr_final`.
 
-Data of step s on rank r depend only on (seed, s, r), so a resumed run continues exactly. Checkpoints
+Data of step s on rank r depend only on (seed, s, r), so a resumed run continues exactly, and `num_workers`
+processes can make batches ahead of the step (DataLoader workers, one torch thread each) with the same result:
+on a GPU machine the exact ground truth (CPU) would otherwise starve the GPU. Checkpoints
 (model + optimiser, safetensors; nothing pickled) are written to <out>/ckpt-<step>/ and published by
 atomically replacing <out>/latest; <out>/log.csv holds the losses. Multi-process: torchrun (DDP, gloo on
 CPU, nccl on CUDA).
 """
 from __future__ import annotations
 
+import copy
 import csv
 import dataclasses
 import json
@@ -82,12 +85,15 @@ class TrainConfig:
     log_every: int = 10
     keep_ckpts: int = 2
     num_threads: int = 0            # torch CPU threads (0: leave torch's default)
+    num_workers: int = 0            # processes that make batches ahead of the step (0: in the training process)
     model_kind: str = "volsmpl"     # 'volsmpl' (SDF, eq. 3) or 'coap' (occupancy baseline, binary cross-entropy)
     model: object = field(default_factory=VolumeConfig)  # VolumeConfig, or CoapConfig for model_kind 'coap'
 
     def __post_init__(self):
         if self.gt_sign not in SIGN_MODES:
             raise ValueError(f"gt_sign must be one of {SIGN_MODES}, got {self.gt_sign!r}")
+        if self.num_workers < 0:
+            raise ValueError(f"num_workers must be >= 0 (0 makes batches in the training process), got {self.num_workers}")
         if not 0.0 <= self.ema_decay < 1.0:
             raise ValueError(f"ema_decay must be in [0, 1) (0 turns the average off), got {self.ema_decay}")
         if not 0 <= self.anneal_start < self.steps:
@@ -202,6 +208,37 @@ def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> d
         gt = batch_mesh_sdf(out.vertices, body.faces, pts, sign=cfg.gt_sign, nsamples=cfg.gt_rays, check_closed=False)
     posed = {"vertices": out.vertices, "joints": out.joints, "full_pose": out.full_pose}
     return {"params": params, "posed": posed, "points": pts, "sdf": gt, "seed": seed}
+
+
+class StepBatches(torch.utils.data.Dataset):
+    """Batch of step s (make_batch) as item s, for DataLoader worker processes. The body and a CPU copy of
+    the partition reach the workers by fork; every batch depends only on (seed, step, rank), so any number
+    of workers gives the batches of the serial loop, in order."""
+
+    def __init__(self, cfg: TrainConfig, body, partition, rank: int):
+        self.cfg, self.body, self.partition, self.rank = cfg, body, partition, rank
+
+    def __len__(self) -> int:
+        return self.cfg.steps
+
+    def __getitem__(self, step: int) -> dict:
+        return make_batch(self.cfg, self.body, self.partition, int(step), self.rank)
+
+
+def _one_thread(_worker_id: int) -> None:
+    torch.set_num_threads(1)
+
+
+def batch_stream(cfg: TrainConfig, body, partition, start: int, end: int, rank: int = 0):
+    """Iterator over the batches of steps start..end-1: made here (num_workers 0) or by worker processes
+    (one torch thread each, two batches ahead per worker)."""
+    if cfg.num_workers == 0 or end <= start:
+        return (make_batch(cfg, body, partition, s, rank) for s in range(start, end))
+    loader = torch.utils.data.DataLoader(
+        StepBatches(cfg, body, partition, rank), batch_size=None, sampler=range(start, end),
+        num_workers=cfg.num_workers, worker_init_fn=_one_thread, prefetch_factor=2,
+        multiprocessing_context="fork", persistent_workers=False)
+    return iter(loader)
 
 
 class TrainStep(torch.nn.Module):
@@ -381,6 +418,13 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         _load_optimizer(opt, load_file(str(ck / "optimizer.safetensors")), json.loads((ck / "optimizer.json").read_text()))
         start = meta["training"]["step"]
         spent = float(meta["training"].get("train_seconds", 0.0))
+    end = cfg.steps if max_steps is None else min(cfg.steps, start + max_steps)
+    if max_seconds is not None and spent >= max_seconds:
+        end = start  # the budget is spent already
+        if rank == 0 and not quiet:
+            print(f"{out_dir}: {spent / 3600:.2f} h of training already reach the budget of {max_seconds / 3600:.2f} h")
+    # workers fork before the model moves to a GPU; they get a CPU copy of the partition
+    batches = batch_stream(cfg, body, copy.deepcopy(volume.partition).cpu(), start, end, rank)
     volume.to(device)
     volume.train()
     if ema_state is not None and not cfg.ema_decay:
@@ -401,15 +445,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     writer = csv.writer(logf) if logf else None
     if new_log:
         writer.writerow(["step", "loss", "sign", "abs", "lr", "sec_per_step", "data_sec"])
-    end = cfg.steps if max_steps is None else min(cfg.steps, start + max_steps)
-    if max_seconds is not None and spent >= max_seconds:
-        end = start  # the budget is spent already
-        if rank == 0 and not quiet:
-            print(f"{out_dir}: {spent / 3600:.2f} h of training already reach the budget of {max_seconds / 3600:.2f} h")
     t0, losses, last = time.time(), [], {}
     for step in range(start, end):
         td = time.time()
-        batch = make_batch(cfg, body, volume.partition, step, rank)
+        batch = next(batches)
         batch = {**batch, "points": batch["points"].to(device), "sdf": batch["sdf"].to(device),
                  "params": {k: v.to(device) for k, v in batch["params"].items()},
                  "posed": {k: v.to(device) for k, v in batch["posed"].items()}}

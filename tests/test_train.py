@@ -237,3 +237,12 @@ def test_ema_checkpoint_publishes_the_average_and_resumes_exactly(tmp_path):
     assert json.loads((b / "model.json").read_text())["meta"]["training"]["ema_updates"] == 4
     with pytest.raises(ValueError, match="ema_decay"):
         train(dataclasses.replace(cfg, ema_decay=0.0), tmp_path / "b", resume=True, max_steps=1, quiet=True)
+
+
+def test_worker_processes_give_the_serial_batches(tmp_path):
+    """Batches made by two DataLoader worker processes are those of the serial loop: same losses."""
+    serial = train(tiny_cfg(), tmp_path / "a", max_steps=3, quiet=True)
+    workers = train(tiny_cfg(num_workers=2), tmp_path / "b", max_steps=3, quiet=True)
+    assert workers["losses"] == pytest.approx(serial["losses"], rel=1e-6, abs=1e-8)
+    with pytest.raises(ValueError, match="num_workers"):
+        TrainConfig(num_workers=-1)
