@@ -53,6 +53,12 @@ class Encoding:
     parts: torch.Tensor | None = None
 
 
+def _check_output(out) -> None:
+    for name in ("vertices", "joints", "full_pose"):
+        if not torch.is_tensor(getattr(out, name, None)):
+            raise TypeError(f"expected a body forward output with tensor '{name}' (call body(...) first), got {type(out).__name__}")
+
+
 def _stamp(out) -> tuple:
     return tuple((t.data_ptr(), t._version, tuple(t.shape), t.dtype, t.device) for t in (out.vertices, out.joints, out.full_pose))
 
@@ -97,9 +103,7 @@ class Volume(torch.nn.Module):
             out: body forward output with vertices (B, V, 3), joints (B, >=J, 3), full_pose (B, J*3).
             generator: draw fresh surface samples (training augmentation) instead of the fixed set; not cached.
         """
-        for name in ("vertices", "joints", "full_pose"):
-            if not torch.is_tensor(getattr(out, name, None)):
-                raise TypeError(f"expected a body forward output with tensor '{name}' (call body(...) first), got {type(out).__name__}")
+        _check_output(out)
         use_cache = generator is None and not self.training
         if use_cache:
             cached = self._cached(out)
@@ -155,7 +159,7 @@ class Volume(torch.nn.Module):
             center, scale = part_normalization(box_min, box_max)
             local = (local - center[:, :, None]) / scale[:, :, None]
         with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
-            code = self.net.encode(local) if parts is None else self.net.encode(local, parts)
+            code = self.net.encode(local, parts)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, stamp=_stamp(out),
                         center=center, scale=scale, parts=parts)
 
@@ -281,7 +285,7 @@ class Volume(torch.nn.Module):
         code_grad=False treats the part codes as constants: the pose gradient then flows through the part
         frames only (rigid part motion), not through the change of each part's shape code, and the backward
         pass skips the encoder (about half of a step's time). On the 17 shipped self-intersection cases its
-        pose gradient has cosine >= 0.97 (median 0.997) with the full one, for VolumetricSMPL and COAP alike.
+        pose gradient has cosine >= 0.97 (median >= 0.997) with the full one, for VolumetricSMPL and COAP alike.
         Only the parts of overlapping box pairs are encoded (unless the output is encoded already): a
         sample lies in two parts' boxes, and a part that forms no overlapping pair with the sample's
         other parts can neither be involved nor be a partner, so the loss and its gradients are those
@@ -290,6 +294,7 @@ class Volume(torch.nn.Module):
         """
         if not tau > 0:
             raise ValueError(f"tau must be > 0 (metres: the SDF scale of the soft occupancy), got {tau}")
+        _check_output(out)
         enc = None if self.training else self._cached(out)
         G, box_min, box_max = self._frames(out) if enc is None else (enc.G, enc.box_min, enc.box_max)
         B = G.shape[0]

@@ -164,6 +164,10 @@ def test_empty_and_bad_points(vbody):
         vol.collision_loss(out, torch.zeros(2, 5, 3), reduction="avg")
     with pytest.raises(TypeError, match="body forward output"):
         vol.query(object(), torch.zeros(2, 5, 3))
+    with pytest.raises(TypeError, match="body forward output"):
+        vol.selfpen_loss(object())
+    with pytest.raises(ValueError, match="tau"):
+        vol.selfpen_loss(out, tau=0.0)
 
 
 def test_selfpen_runs(vbody):
