@@ -410,8 +410,10 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         if saved_cfg["model"] != cfg.model.to_dict():
             raise ValueError(f"{ck} was trained with model config {saved_cfg['model']}, not {cfg.model.to_dict()}; "
                              f"resume with the run's own config ({out_dir}/config.json).")
-        ema_state, ema_updates = None, 0
         if (ck / "live.safetensors").exists():  # the model file is the average; optimise on from the live weights
+            if not cfg.ema_decay:
+                raise ValueError(f"{ck} holds averaged weights (ema_decay > 0) but the config has ema_decay=0; resume "
+                                 f"with the run's own config ({out_dir}/config.json).")
             ema_state, state = state, load_file(str(ck / "live.safetensors"))
             ema_updates = int(meta["training"].get("ema_updates", 0))
         volume.net.load_state_dict(state)
@@ -427,9 +429,6 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     batches = batch_stream(cfg, body, copy.deepcopy(volume.partition).cpu(), start, end, rank)
     volume.to(device)
     volume.train()
-    if ema_state is not None and not cfg.ema_decay:
-        raise ValueError(f"{ck} holds averaged weights (ema_decay > 0) but the config has ema_decay=0; resume with "
-                         f"the run's own config ({out_dir}/config.json).")
     ema = WeightEMA(volume.net, cfg.ema_decay, ema_state, ema_updates) if cfg.ema_decay else None
     volume.net.encoder_bf16 = cfg.encoder_bf16
     step_mod = TrainStep(volume, cfg)  # the body stays on the CPU: batches (and exact GT) are made there
