@@ -48,6 +48,7 @@ class Encoding:
     code: PartCode
     stamp: tuple
     ref: tuple | None = None  # detached (vertices, joints, full_pose) of a constant output, for value reuse
+    weights: tuple | None = None  # the network's weights_stamp when encoded: a cached encoding is stale after any change
     center: torch.Tensor | None = None
     scale: torch.Tensor | None = None
     parts: torch.Tensor | None = None
@@ -61,6 +62,12 @@ def _check_output(out) -> None:
 
 def _stamp(out) -> tuple:
     return tuple((t.data_ptr(), t._version, tuple(t.shape), t.dtype, t.device) for t in (out.vertices, out.joints, out.full_pose))
+
+
+def weights_stamp(module: torch.nn.Module) -> tuple:
+    """Identity and in-place version of every parameter and buffer of a module: changes when an optimiser
+    step, load_state_dict, .to() or any in-place edit touches a weight, so cached encodings can tell."""
+    return tuple((t.data_ptr(), t._version, t.dtype, t.device) for t in (*module.parameters(), *module.buffers()))
 
 
 def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -97,7 +104,8 @@ class Volume(torch.nn.Module):
 
     # ------------------------------------------------------------------ encoding
     def encode(self, out, generator: torch.Generator | None = None) -> Encoding:
-        """Encode a body output (B bodies); cached on the output and reused while its tensors are unchanged.
+        """Encode a body output (B bodies); cached on the output and reused while its tensors and the
+        network's weights are unchanged (an optimiser step or load_state_dict between queries re-encodes).
 
         Args:
             out: body forward output with vertices (B, V, 3), joints (B, >=J, 3), full_pose (B, J*3).
@@ -123,10 +131,11 @@ class Volume(torch.nn.Module):
     def _cached(self, out) -> Encoding | None:
         """The encoding of `out` made earlier (same tensors, or equal constant tensors), else None."""
         cached = getattr(out, "_volsmpl_encoding", None)
-        if cached is not None and cached[0] is self and cached[1].stamp == _stamp(out):
+        weights = weights_stamp(self.net)
+        if cached is not None and cached[0] is self and cached[1].stamp == _stamp(out) and cached[1].weights == weights:
             return cached[1]
         last, no_grad = self._last, not (out.vertices.requires_grad or out.joints.requires_grad)
-        if no_grad and last is not None and last.ref[0].shape == out.vertices.shape and all(
+        if no_grad and last is not None and last.weights == weights and last.ref[0].shape == out.vertices.shape and all(
                 torch.equal(a, b) for a, b in zip(last.ref, (out.vertices, out.joints, out.full_pose))):
             return last  # same pose, shape and translation as the previous constant output
         return None
@@ -161,7 +170,7 @@ class Volume(torch.nn.Module):
         with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
             code = self.net.encode(local, parts)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, stamp=_stamp(out),
-                        center=center, scale=scale, parts=parts)
+                        center=center, scale=scale, parts=parts, weights=weights_stamp(self.net))
 
     # ------------------------------------------------------------------ evaluation core
     @property

@@ -133,6 +133,40 @@ def test_cache(vbody):
     assert vol.encode(out) is not e1
 
 
+def test_cache_follows_weight_changes(tiny_config):
+    """A cached encoding must not outlive the weights it was made with: after an optimiser step or
+    load_state_dict, queries of the same output (and of an equal new output) equal a fresh volume's."""
+    torch.manual_seed(0)
+    b = volsmpl.create_body()
+    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).eval()
+    p = random_pose(1, seed=11)
+    with torch.no_grad():
+        out = b(**p)
+    pts = _near_points(out, 200, seed=3)
+    with torch.no_grad():
+        before = vol.query(out, pts)
+    # one optimiser step on the decoder output (what a user fine-tuning the volume does between queries)
+    opt = torch.optim.SGD(vol.net.parameters(), lr=0.5)
+    vol.train()
+    vol.query(out, pts).square().mean().backward()
+    opt.step()
+    vol.eval()
+    ref_body = volsmpl.create_body()
+    ref = volsmpl.attach_volume(ref_body, pretrained=False, config=tiny_config).eval()
+    ref.net.load_state_dict(vol.net.state_dict())
+    with torch.no_grad():
+        expect = ref.query(ref_body(**p), pts)
+        assert not torch.allclose(expect, before)  # the step changed the field
+        assert torch.equal(vol.query(out, pts), expect)  # same output object
+        assert torch.equal(vol.query(b(**p), pts), expect)  # equal new output (value reuse path)
+    # load_state_dict in eval mode (another checkpoint into the same volume)
+    other = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=tiny_config).eval()
+    with torch.no_grad():
+        vol.net.load_state_dict(other.net.state_dict())
+        assert torch.equal(vol.query(out, pts), other.query(other_out := b(**p), pts))
+        assert torch.equal(vol.query(b(**p), pts), other.query(other_out, pts))
+
+
 def test_no_grad_value_reuse(vbody):
     vol = vbody.volume
     p = random_pose(1, seed=6)
