@@ -67,7 +67,7 @@ def _stamp(out) -> tuple:
 def weights_stamp(module: torch.nn.Module) -> tuple:
     """Identity and in-place version of every parameter and buffer of a module: changes when an optimiser
     step, load_state_dict, .to() or any in-place edit touches a weight, so cached encodings can tell."""
-    return tuple((t.data_ptr(), t._version, t.dtype, t.device) for t in (*module.parameters(), *module.buffers()))
+    return tuple((t.data_ptr(), t._version) for t in (*module.parameters(), *module.buffers()))  # .to() moves storage
 
 
 def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
