@@ -10,7 +10,8 @@
     mesh = body.volume.extract_mesh(out, resolution=128)
 
 Data flow: body output -> partition (G_k, padded boxes, part surface samples) -> PointNet z_k ->
-NBW decoder weights (cached per body output) -> query: points to part frames, cull by boxes,
+NBW decoder weights (only for the parts whose boxes hold query points; cached per body output and
+grown by later queries) -> query: points to part frames, cull by boxes,
 tiny decoders only on (point, part) pairs inside boxes (or densely, the reference path),
 min over parts; points in no box get the analytic box SDF (paper eq. 4).
 """
@@ -38,9 +39,12 @@ DEFAULT_CHECKPOINTS = {"volsmpl": ASSETS / "volsmpl_anny", "coap": ASSETS / "coa
 @dataclass
 class Encoding:
     """Per-forward-output body encoding. G (B, K, 4, 4) part-to-world; box_min/max (B, K, 3) padded
-    boxes in part frames; code: PartCode (z_k and generated decoder weights); center (B, K, 3) and
-    scale (B, K, 1) of the part normalisation (config.normalize_parts), else None. parts: None when all
-    K parts are encoded; else the (K',) int64 ids of an encoded part subset, and every K axis above is K'."""
+    boxes in part frames; center (B, K, 3) and scale (B, K, 1) of the part normalisation
+    (config.normalize_parts), else None: these are always for all K parts (cheap, no network).
+    code: PartCode (z_k and generated decoder weights) of the encoded parts: all K when parts is None;
+    else of the (K',) int64 ids `parts` (K' may be 0: code None), and slot (K,) int64 maps part k to its
+    index in the code (-1: not encoded). A query may only decode parts that are encoded (Volume.query
+    encodes the parts whose boxes hold its points)."""
 
     G: torch.Tensor
     box_min: torch.Tensor
@@ -52,6 +56,13 @@ class Encoding:
     center: torch.Tensor | None = None
     scale: torch.Tensor | None = None
     parts: torch.Tensor | None = None
+    slot: torch.Tensor | None = None
+
+    def encoded(self, num_parts: int) -> torch.Tensor:
+        """(K,) bool: which parts have a code."""
+        if self.slot is None:
+            return torch.ones(num_parts, dtype=torch.bool, device=self.G.device)
+        return self.slot >= 0
 
 
 def _check_output(out) -> None:
@@ -113,20 +124,57 @@ class Volume(torch.nn.Module):
         """
         _check_output(out)
         use_cache = generator is None and not self.training
+        cached = self._cached(out) if use_cache else None
+        if cached is not None and cached.parts is None:
+            return cached
+        frames = None if cached is None else (cached.G, cached.box_min, cached.box_max)
+        enc = self._encode(out, generator, frames=frames)
         if use_cache:
-            cached = self._cached(out)
-            if cached is not None:
-                return cached
-        enc = self._encode(out, generator)
-        if use_cache:
-            try:
-                out._volsmpl_encoding = (self, enc)
-            except AttributeError:  # outputs that take no attributes are re-encoded on every call
-                pass
-            if not (out.vertices.requires_grad or out.joints.requires_grad):
-                enc.ref = tuple(t.detach().clone() for t in (out.vertices, out.joints, out.full_pose))
-                self._last = enc
+            self._store(out, enc)
         return enc
+
+    def _store(self, out, enc: Encoding) -> None:
+        """Cache `enc` on the output (and, for a constant output, as the last encoding for value reuse)."""
+        try:
+            out._volsmpl_encoding = (self, enc)
+        except AttributeError:  # outputs that take no attributes are re-encoded on every call
+            pass
+        if not (out.vertices.requires_grad or out.joints.requires_grad):
+            enc.ref = tuple(t.detach().clone() for t in (out.vertices, out.joints, out.full_pose))
+            self._last = enc
+
+    def _encoding_for(self, out, points: torch.Tensor) -> Encoding:
+        """An encoding of `out` that answers queries at `points` (B, N, 3): the cached one when it has a code
+        for every part whose padded box holds a point, else a new one of those parts (and the cached
+        ones), cached in turn. A part whose box holds no point only contributes its analytic box
+        distance, so encoding it would change nothing: queries near a few parts (a hand and an object)
+        run the encoder on those parts only."""
+        _check_output(out)
+        enc = None if self.training else self._cached(out)
+        if enc is not None and enc.parts is None:
+            return enc
+        frames = self._frames(out) if enc is None else (enc.G, enc.box_min, enc.box_max)
+        need = self._parts_holding(points, *frames)
+        if enc is not None:
+            have = enc.encoded(self.num_parts)
+            if not (need & ~have).any():
+                return enc
+            need |= have
+        parts = None if need.all() else need.nonzero()[:, 0]
+        enc = self._encode(out, None, parts=parts, frames=frames)
+        if not self.training:
+            self._store(out, enc)
+        return enc
+
+    @torch.no_grad()
+    def _parts_holding(self, points: torch.Tensor, G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor) -> torch.Tensor:
+        """(K,) bool: parts whose padded box holds at least one of the points (B, N, 3) of some body."""
+        need = torch.zeros(self.num_parts, dtype=torch.bool, device=G.device)
+        B, N = points.shape[:2]
+        for s, e in self._chunks(B, N):
+            x = Partition.canonicalize(points[:, s:e].detach(), G.detach())
+            need |= inside_boxes(x, box_min.detach(), box_max.detach()).any(dim=2).any(dim=0)
+        return need
 
     def _cached(self, out) -> Encoding | None:
         """The encoding of `out` made earlier (same tensors, or equal constant tensors), else None."""
@@ -147,8 +195,8 @@ class Volume(torch.nn.Module):
         return (G, *p.boxes(out.vertices, G))
 
     def _encode(self, out, generator, parts: torch.Tensor | None = None, frames=None, code_grad: bool = True) -> Encoding:
-        """Encode all parts, or only `parts` ((K',) int64 ids; the Encoding's K axis is then K').
-        frames: (G, box_min, box_max) of `out` when already computed (see _frames). code_grad=False runs the
+        """Encode all parts, or only `parts` ((K',) int64 ids, possibly empty; frames and boxes are kept
+        for all K parts, the code is for `parts`, see Encoding). frames: (G, box_min, box_max) of `out` when already computed (see _frames). code_grad=False runs the
         encoder without autograd: the codes are constants and gradients reach the body only through the
         part frames and boxes (rigid part motion)."""
         v, dtype = out.vertices, out.vertices.dtype
@@ -159,18 +207,26 @@ class Volume(torch.nn.Module):
             raise ValueError(f"the body output is {dtype} on {v.device} but the volume is "
                              f"{next(self.net.parameters()).dtype} on {p.faces.device}; move it with body.volume.to(device, dtype).")
         G, box_min, box_max = self._frames(out) if frames is None else frames
-        surface = p.surface_points(v, generator)  # (B, K, n, 3)
-        if parts is not None:
-            G, box_min, box_max, surface = G[:, parts], box_min[:, parts], box_max[:, parts], surface[:, parts]
-        local = p.to_part_frames(surface, G)
         center = scale = None
         if getattr(self.net.config, "normalize_parts", False):
             center, scale = part_normalization(box_min, box_max)
-            local = (local - center[:, :, None]) / scale[:, :, None]
-        with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
-            code = self.net.encode(local, parts)
-        return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, stamp=_stamp(out),
-                        center=center, scale=scale, parts=parts, weights=weights_stamp(self.net))
+        surface = p.surface_points(v, generator)  # (B, K, n, 3)
+        Gs, cs, ss, slot = G, center, scale, None
+        if parts is not None:
+            surface, Gs = surface[:, parts], G[:, parts]
+            if center is not None:
+                cs, ss = center[:, parts], scale[:, parts]
+            slot = torch.full((p.num_parts,), -1, dtype=torch.long, device=v.device)
+            slot[parts] = torch.arange(len(parts), device=v.device)
+        code = None
+        if parts is None or len(parts):
+            local = p.to_part_frames(surface, Gs)
+            if center is not None:
+                local = (local - cs[:, :, None]) / ss[:, :, None]
+            with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
+                code = self.net.encode(local, parts)
+        return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, stamp=_stamp(out), center=center,
+                        scale=scale, parts=parts, slot=slot, weights=weights_stamp(self.net))
 
     # ------------------------------------------------------------------ evaluation core
     @property
@@ -191,30 +247,43 @@ class Volume(torch.nn.Module):
         """points (B, N, 3) -> part (B, K, N), inside (B, K, N) bool (point in part k's padded box).
 
         SDF models: part k's decoder inside its box, the exact box SDF outside. Occupancy models:
-        part k's occupancy inside its box, 0 outside (COAP's masking)."""
+        part k's occupancy inside its box, 0 outside (COAP's masking). A part without a code (subset
+        encoding) is absent inside its box: +inf (SDF) / 0 (occupancy) there, and inside is False."""
         x_local = Partition.canonicalize(points, enc.G)
         inside = inside_boxes(x_local, enc.box_min, enc.box_max)
         if self.is_sdf:
             outside = box_sdf(x_local, enc.box_min[:, :, None], enc.box_max[:, :, None])
         else:
             outside = x_local.new_zeros(x_local.shape[:3])
+        if enc.slot is not None:
+            known = enc.encoded(self.num_parts)[None, :, None]
+            outside = torch.where(inside & ~known, float("inf") if self.is_sdf else 0.0, outside)
+            inside = inside & known
         norm = enc.scale is not None
         if dense:
-            self.decoder_evaluations += x_local.shape[0] * x_local.shape[1] * x_local.shape[2]
-            extra = {} if self.is_sdf else {"inside": inside}
+            kk = slice(None) if enc.parts is None else enc.parts
+            xs, ins = x_local[:, kk], inside[:, kk]
+            if xs.shape[1] == 0:
+                return outside, inside
+            self.decoder_evaluations += xs.shape[0] * xs.shape[1] * xs.shape[2]
+            extra = {} if self.is_sdf else {"inside": ins}
             if norm:
-                c, sc = enc.center[:, :, None], enc.scale[:, :, None]
-                vals = self.net.decode_dense((x_local - c) / sc, enc.code, **extra) * sc[..., 0]
+                c, sc = enc.center[:, kk, None], enc.scale[:, kk, None]
+                vals = self.net.decode_dense((xs - c) / sc, enc.code, **extra) * sc[..., 0]
             else:
-                vals = self.net.decode_dense(x_local, enc.code, **extra)
-            return torch.where(inside, vals, outside), inside
+                vals = self.net.decode_dense(xs, enc.code, **extra)
+            vals = torch.where(ins, vals, outside[:, kk])
+            return (vals if enc.parts is None else outside.index_copy(1, enc.parts, vals)), inside
         b, k, n = inside.nonzero(as_tuple=True)
         self.decoder_evaluations += b.numel()
+        if b.numel() == 0:
+            return outside, inside
+        kc = k if enc.slot is None else enc.slot[k]  # index into the code's part axis
         if norm:
             sc = enc.scale[b, k]
-            vals = self.net.decode_pairs((x_local[b, k, n] - enc.center[b, k]) / sc, b, k, enc.code) * sc[:, 0]
+            vals = self.net.decode_pairs((x_local[b, k, n] - enc.center[b, k]) / sc, b, kc, enc.code) * sc[:, 0]
         else:
-            vals = self.net.decode_pairs(x_local[b, k, n], b, k, enc.code)
+            vals = self.net.decode_pairs(x_local[b, k, n], b, kc, enc.code)
         return outside.index_put((b, k, n), vals), inside
 
     def _chunks(self, B: int, N: int):
@@ -229,8 +298,9 @@ class Volume(torch.nn.Module):
         Args: out: body output (B bodies); points: (B, N, 3) or (N, 3) shared by all bodies.
         Returns: (B, K, N).
         """
-        enc = self.encode(out)
+        _check_output(out)
         points = check_points(points, out.vertices)
+        enc = self._encoding_for(out, points)
         dense = self.dense if dense is None else dense
         B, N = points.shape[:2]
         parts = [self._part_values(enc, points[:, s:e], dense)[0] for s, e in self._chunks(B, N)]
@@ -244,10 +314,14 @@ class Volume(torch.nn.Module):
         Args: out: body output (B bodies); points: (B, N, 3) or (N, 3) shared by all bodies.
         Returns: (B, N); an empty (B, 0) for N = 0.
         """
-        return self.query_encoded(self.encode(out), check_points(points, out.vertices), dense)
+        _check_output(out)
+        points = check_points(points, out.vertices)
+        return self.query_encoded(self._encoding_for(out, points), points, dense)
 
     def query_encoded(self, enc: Encoding, points: torch.Tensor, dense: bool | None = None) -> torch.Tensor:
-        """`query` on an explicit encoding (training encodes with fresh surface samples). points (B, N, 3) -> (B, N)."""
+        """`query` on an explicit encoding (training encodes with fresh surface samples). points (B, N, 3) -> (B, N).
+        A subset encoding must have a code for every part whose box holds a point (else those parts are
+        skipped); `query` ensures it."""
         dense = self.dense if dense is None else dense
         B, N = points.shape[:2]
         res = []
@@ -320,10 +394,11 @@ class Volume(torch.nn.Module):
         if M == 0:
             zero = out.vertices.sum() * 0  # keeps the graph (and device/dtype)
             return (zero.expand(B).clone(), [c for c in cands]) if return_points else zero.expand(B).clone()
-        if enc is None:  # encode only the parts of overlapping pairs: no other part can be involved (docstring)
-            parts = overl.any(dim=0).any(dim=0).nonzero()[:, 0]
+        need = overl.any(dim=0).any(dim=0)
+        if enc is None or (need & ~enc.encoded(self.num_parts)).any():
+            # encode only the parts of overlapping pairs: no other part can be involved (docstring)
+            parts = None if need.all() else need.nonzero()[:, 0]
             enc = self._encode(out, None, parts=parts, frames=(G, box_min, box_max), code_grad=code_grad)
-            mask = mask[parts][:, parts]
         far = out.vertices.detach().amax(dim=(0, 1)) + 10.0  # padding point outside every box: no network cost
         padded = far.expand(B, M, 3).clone()
         for b, c in enumerate(cands):

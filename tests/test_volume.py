@@ -476,3 +476,62 @@ def test_selfpen_rigid_code_gradient():
     assert seen == [True, False]
     torch.testing.assert_close(l_full, l_rigid)
     assert torch.nn.functional.cosine_similarity(g_full.flatten(), g_rigid.flatten(), dim=0) > 0.95
+
+
+@pytest.mark.needs_checkpoint
+@pytest.mark.parametrize("model", ["volsmpl", "coap"])
+def test_queries_encode_only_parts_holding_points(model):
+    """query / query_parts / collision_loss run the encoder only on parts whose boxes hold a query point;
+    values and gradients (pose, shape, translation, points) equal those of the all-parts encoding, and a
+    later query elsewhere on the same output encodes the missing parts (and equals the full one too)."""
+    b = volsmpl.create_body()
+    vol = volsmpl.attach_volume(b, model=model).eval()
+    encoded = []
+    enc = vol.net.encode
+    vol.net.encode = lambda local, *a: encoded.append(local.shape[1]) or enc(local, *a)
+    p = random_pose(1, seed=21)
+    hand = vol.partition.tight_vertices[vol.partition.table.part_names.index("right_hand")]
+    g = torch.Generator().manual_seed(0)
+
+    def run(points_of, full):
+        q = {k: v.clone().requires_grad_() for k, v in p.items()}
+        out = b(**q)
+        pts = points_of(out).detach().requires_grad_()
+        if full:
+            e = vol._encode(out, None)
+            d = vol.query_encoded(e, pts)
+            parts = torch.cat([vol._part_values(e, pts, False)[0]], dim=2)
+        else:
+            d = vol.query(out, pts)
+            parts = vol.query_parts(out, pts)
+            assert torch.equal(vol.collision_loss(out, pts, reduction="none"),
+                               torch.relu(-d) if vol.is_sdf else torch.relu(d - vol.level))
+        grads = torch.autograd.grad(d.sum() + parts.clamp(-1, 1).sum(), (q["body_pose"], q["betas"], q["transl"], pts))
+        return [d.detach(), parts.detach(), *grads], out
+
+    near_hand = lambda out: out.vertices[:, hand][:, torch.randint(0, len(hand), (300,), generator=g)] \
+        + 0.02 * torch.randn(1, 300, 3, generator=g)
+    ref, _ = run(near_hand, True)
+    g = torch.Generator().manual_seed(0)
+    encoded.clear()
+    got, out = run(near_hand, False)
+    assert 0 < encoded[0] < vol.num_parts and len(encoded) == 1  # query_parts reused query's subset encoding
+    for a, c in zip(got, ref):  # float32: the encoder's batch differs (K' vs K parts), so the sums' order
+        torch.testing.assert_close(a, c, rtol=1e-4, atol=1e-5)
+    assert ref[0].lt(0).any() if vol.is_sdf else ref[0].gt(vol.level).any()  # some points inside the hand
+    # a constant output: the subset encoding is cached and grows with a query over the whole body
+    with torch.no_grad():
+        out = b(**p)
+        vol.query(out, near_hand(out))
+        everywhere = out.vertices[:, ::7] + 0.01
+        encoded.clear()
+        d = vol.query(out, everywhere)
+        assert encoded == [vol.num_parts]
+        torch.testing.assert_close(d, vol.query_encoded(vol._encode(out, None), everywhere))
+        far = torch.full((1, 4, 3), 9.0)
+        encoded.clear()
+        vol._last = None
+        out2 = b(**{**p, "transl": p["transl"] + 0.5})
+        d_far = vol.query(out2, far)  # no point in any box: no encoder run, the analytic distance
+        assert encoded == [] and torch.isfinite(d_far).all()
+        torch.testing.assert_close(d_far, vol.query_encoded(vol._encode(out2, None), far))
