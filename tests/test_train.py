@@ -1,6 +1,7 @@
 """Training: loss definition, learning on a fixed batch, exact resume, micro-batching, DDP on gloo."""
 from __future__ import annotations
 
+import math
 import dataclasses
 import json
 import os
@@ -39,6 +40,34 @@ def test_loss_terms():
     l, _ = sdf_loss(pred, torch.tensor([[-0.05, -0.04, 0.1]]), TrainConfig(abs_weight=0.0))
     l.backward()
     assert pred.grad[0, 0] > 0 and pred.grad[0, 1] == 0 and pred.grad[0, 2] == 0
+
+
+def test_logistic_sign_term():
+    """sign_loss='logistic': sign_weight * mean softplus(-sgn(d) d~ / tau), by hand; an unresolved point (the same
+    location labelled inside and outside) has its optimum at a graded value, not at a plateau's 0."""
+    cfg = TrainConfig(sign_loss="logistic", sign_tau=0.002, sign_weight=0.5, abs_weight=0.0)
+    gt = torch.tensor([[0.01, -0.004, 0.003]], dtype=torch.float64)
+    pred = torch.tensor([[0.002, 0.001, -0.006]], dtype=torch.float64)
+    _, parts = sdf_loss(pred, gt, cfg)
+    by_hand = [math.log1p(math.exp(-y * p / 0.002)) for y, p in ((1, 0.002), (-1, 0.001), (1, -0.006))]
+    assert parts["sign"] == pytest.approx(0.5 * sum(by_hand) / 3, rel=1e-9)
+    # one location, labelled outside with probability 0.8 (4 of 5 samples): the minimiser is tau * log-odds
+    x = torch.zeros(1, 1, dtype=torch.float64, requires_grad=True)
+    labels = torch.tensor([[0.001, 0.001, 0.001, 0.001, -0.001]], dtype=torch.float64)
+    opt = torch.optim.LBFGS([x], lr=1e-3, max_iter=200, tolerance_grad=1e-12, tolerance_change=1e-15,
+                            line_search_fn="strong_wolfe")
+
+    def closure():
+        opt.zero_grad()
+        loss = sdf_loss(x.expand(1, 5), labels, cfg)[0]
+        loss.backward()
+        return loss
+    opt.step(closure)
+    assert float(x) == pytest.approx(0.002 * math.log(4.0), rel=1e-4)
+    with pytest.raises(ValueError, match="sign_loss"):
+        TrainConfig(sign_loss="hinge")
+    with pytest.raises(ValueError, match="sign_tau"):
+        TrainConfig(sign_tau=0.0)
 
 
 def test_wrong_sign_fixed_point_only_with_abs_residual():
