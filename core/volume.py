@@ -179,12 +179,13 @@ class Volume(torch.nn.Module):
     def _cached(self, out) -> Encoding | None:
         """The encoding of `out` made earlier (same tensors, or equal constant tensors), else None."""
         cached = getattr(out, "_volsmpl_encoding", None)
-        weights = weights_stamp(self.net)
-        if cached is not None and cached[0] is self and cached[1].stamp == _stamp(out) and cached[1].weights == weights:
+        if cached is not None and cached[0] is self and cached[1].stamp == _stamp(out) \
+                and cached[1].weights == weights_stamp(self.net):
             return cached[1]
         last, no_grad = self._last, not (out.vertices.requires_grad or out.joints.requires_grad)
-        if no_grad and last is not None and last.weights == weights and last.ref[0].shape == out.vertices.shape and all(
-                torch.equal(a, b) for a, b in zip(last.ref, (out.vertices, out.joints, out.full_pose))):
+        if no_grad and last is not None and last.ref[0].shape == out.vertices.shape and all(
+                torch.equal(a, b) for a, b in zip(last.ref, (out.vertices, out.joints, out.full_pose))) \
+                and last.weights == weights_stamp(self.net):
             return last  # same pose, shape and translation as the previous constant output
         return None
 
@@ -196,9 +197,9 @@ class Volume(torch.nn.Module):
 
     def _encode(self, out, generator, parts: torch.Tensor | None = None, frames=None, code_grad: bool = True) -> Encoding:
         """Encode all parts, or only `parts` ((K',) int64 ids, possibly empty; frames and boxes are kept
-        for all K parts, the code is for `parts`, see Encoding). frames: (G, box_min, box_max) of `out` when already computed (see _frames). code_grad=False runs the
-        encoder without autograd: the codes are constants and gradients reach the body only through the
-        part frames and boxes (rigid part motion)."""
+        for all K parts, the code is for `parts`, see Encoding). frames: (G, box_min, box_max) of `out`
+        when already computed (see _frames). code_grad=False runs the encoder without autograd: the codes are
+        constants and gradients reach the body only through the part frames and boxes (rigid part motion)."""
         v, dtype = out.vertices, out.vertices.dtype
         if v.ndim != 3 or v.shape[-1] != 3:
             raise ValueError(f"out.vertices must be (B, V, 3), got {tuple(v.shape)}")
