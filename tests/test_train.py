@@ -1,9 +1,9 @@
 """Training: loss definition, learning on a fixed batch, exact resume, micro-batching, DDP on gloo."""
 from __future__ import annotations
 
-import math
 import dataclasses
 import json
+import math
 import os
 import subprocess
 import sys
