@@ -60,7 +60,7 @@ import torch
 import torch.distributed as dist
 
 from .body.model import create_body
-from .body.poses import sample_poses
+from .body.poses import POSE_MODES, sample_poses
 from .body.shapes import sample_betas
 from .checkpoint import load_checkpoint, save_checkpoint
 from .groundtruth import SIGN_MODES, batch_mesh_sdf, sample_training_queries
@@ -86,7 +86,8 @@ class TrainConfig:
     sign_weight: float = 1.0        # weight of the sign term
     abs_weight: float = 1e4         # |SDF| term in cm^2
     residual: str = "signed"        # distance term: 'signed' (d~ - d)^2 or 'abs' (|d~| - |d|)^2 (eq. 3 literally)
-    pose_mode: str = "realistic"
+    pose_mode: str = "realistic"    # training poses: 'realistic', 'extreme' or 'mixed' (volsmpl.body.poses.sample_euler)
+    extreme_fraction: float = 0.5   # pose_mode 'mixed': share of bodies with extreme poses
     global_orient_scale: float = 0.0  # rad sd of random global orientation (parts are in local frames anyway)
     gt_sign: str = "fast_winding"   # ground-truth sign: 'fast_winding' / 'winding' (libigl; self-overlaps inside) or 'raycast'
     gt_rays: int = 5                # ray-voting rays for gt_sign='raycast'
@@ -114,6 +115,9 @@ class TrainConfig:
             raise ValueError(f"sign_loss must be 'ste' or 'logistic', got {self.sign_loss!r}")
         if not (self.sign_tau > 0 and self.sign_weight >= 0):
             raise ValueError(f"sign_tau={self.sign_tau} must be > 0 (metres) and sign_weight={self.sign_weight} >= 0.")
+        if self.pose_mode not in POSE_MODES or not 0.0 <= self.extreme_fraction <= 1.0:
+            raise ValueError(f"pose_mode must be one of {POSE_MODES} (got {self.pose_mode!r}) and extreme_fraction in "
+                             f"[0, 1] (got {self.extreme_fraction}).")
         if self.residual not in ("signed", "abs"):
             raise ValueError(f"residual must be 'signed' or 'abs', got {self.residual!r}")
         if self.model_kind == "coap" and isinstance(self.model, VolumeConfig):
@@ -217,7 +221,7 @@ def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> d
     B = cfg.batch_size
     params = {
         "betas": sample_betas(B, num_betas=body.num_betas, seed=seed),
-        "body_pose": sample_poses(B, seed=seed, mode=cfg.pose_mode),
+        "body_pose": sample_poses(B, seed=seed, mode=cfg.pose_mode, extreme_fraction=cfg.extreme_fraction),
         "global_orient": torch.randn(B, 3, generator=g) * cfg.global_orient_scale,
         "transl": torch.zeros(B, 3),
     }

@@ -25,6 +25,24 @@ def test_realistic_is_concentrated_and_not_uniform():
         assert (e[..., axis].min(0) < lo + 0.1 * (np.array([JOINT_LIMITS[j][axis][1] for j in JOINT_LIMITS]) - lo) + 1e-9).all()
 
 
+def test_mixed_mode_draws_whole_bodies_from_either_sampler():
+    n = 4000
+    r, e = sample_euler(n, seed=5), sample_euler(n, seed=5, mode="extreme")
+    assert np.array_equal(sample_euler(n, seed=5, mode="mixed", extreme_fraction=0.0), r)
+    m = sample_euler(n, seed=5, mode="mixed", extreme_fraction=0.3)
+    same = (m == r).reshape(n, -1).all(1)   # body kept its realistic angles
+    changed = (m != r).reshape(n, -1).all(1)  # body replaced whole (fresh uniform angles differ everywhere)
+    assert (same | changed).all()
+    assert abs(changed.mean() - 0.3) < 3 * (0.3 * 0.7 / n) ** 0.5
+    # the replaced bodies follow the extreme (uniform) law: same mean |angle| as mode 'extreme' within noise
+    assert np.abs(np.abs(m[changed]).mean() - np.abs(e).mean()) < 0.02
+    assert within_limits(sample_poses(50, seed=1, mode="mixed", extreme_fraction=1.0)).all()
+    with pytest.raises(ValueError, match="mode must be one of"):
+        sample_euler(2, mode="wild")
+    with pytest.raises(ValueError, match="extreme_fraction"):
+        sample_euler(2, mode="mixed", extreme_fraction=-0.1)
+
+
 def test_out_of_limits_detected():
     p = torch.zeros(1, 69)
     p[0, 3 * 3] = -1.0  # left knee bent the wrong way (x < 0)

@@ -223,6 +223,10 @@ def test_bad_loss_and_sign_options_fail_at_construction():
         TrainConfig(residual="l1")
     with pytest.raises(ValueError, match="gt_sign"):
         TrainConfig(gt_sign="parity")
+    with pytest.raises(ValueError, match="pose_mode"):
+        TrainConfig(pose_mode="wild")
+    with pytest.raises(ValueError, match="extreme_fraction"):
+        TrainConfig(pose_mode="mixed", extreme_fraction=1.5)
 
 
 def test_lr_anneal_start():

@@ -76,29 +76,43 @@ def body_pose_to_euler(body_pose: torch.Tensor) -> np.ndarray:
     return out
 
 
-def sample_euler(n: int, seed: int | None = None, mode: str = "realistic") -> np.ndarray:
+POSE_MODES = ("realistic", "extreme", "mixed")
+
+
+def sample_euler(n: int, seed: int | None = None, mode: str = "realistic",
+                 extreme_fraction: float = 0.5) -> np.ndarray:
     """Random joint angles within JOINT_LIMITS, (n, 23, 3).
 
     mode 'realistic': per angle, with prob. 0.6 a normal around the neutral angle (0 clipped into the
     limits) with sd 1/4 of the range, else uniform in the range; then clipped to the limits.
     mode 'extreme': uniform over the full range of every angle (validation of hard poses).
+    mode 'mixed': per body, with prob. `extreme_fraction` an extreme pose, else a realistic one (the
+    realistic bodies are those mode 'realistic' draws from the same seed).
     """
+    if mode not in POSE_MODES:
+        raise ValueError(f"mode must be one of {POSE_MODES}, got {mode!r}")
+    if not 0.0 <= extreme_fraction <= 1.0:
+        raise ValueError(f"extreme_fraction must lie in [0, 1], got {extreme_fraction}")
     rng = np.random.default_rng(seed)
     lo, hi = _LIMITS[..., 0], _LIMITS[..., 1]
     uni = rng.uniform(lo, hi, size=(n, *lo.shape))
     if mode == "extreme":
         return uni
-    if mode != "realistic":
-        raise ValueError(f"mode must be 'realistic' or 'extreme', got {mode!r}")
     centre = np.clip(0.0, lo, hi)
     gauss = centre + rng.standard_normal((n, *lo.shape)) * (hi - lo) / 4
     pick = rng.random((n, *lo.shape)) < 0.6
-    return np.clip(np.where(pick, gauss, uni), lo, hi)
+    realistic = np.clip(np.where(pick, gauss, uni), lo, hi)
+    if mode == "realistic":
+        return realistic
+    extreme = rng.uniform(lo, hi, size=(n, *lo.shape))  # fresh draws: `uni` already fed the realistic angles
+    body_extreme = rng.random(n) < extreme_fraction
+    return np.where(body_extreme[:, None, None], extreme, realistic)
 
 
-def sample_poses(n: int, seed: int | None = None, mode: str = "realistic") -> torch.Tensor:
+def sample_poses(n: int, seed: int | None = None, mode: str = "realistic",
+                 extreme_fraction: float = 0.5) -> torch.Tensor:
     """(n, 69) random SMPL body poses within per-joint anatomical limits (see sample_euler)."""
-    return euler_to_body_pose(sample_euler(n, seed, mode))
+    return euler_to_body_pose(sample_euler(n, seed, mode, extreme_fraction))
 
 
 def within_limits(body_pose: torch.Tensor, tol: float = 1e-6) -> torch.Tensor:
