@@ -11,7 +11,8 @@ from a seed (default VAL_SEED). Body i is built from its own random stream SeedS
 `validation_bodies(n)` is a prefix of `validation_bodies(m)` for n <= m, independent of n:
   - pose: odd i < 2 * len(NAMED_POSES) take the named poses in NAMED_POSES order (all 12 at n >= 24);
     every other body an *extreme* pose (`sample_poses(mode='extreme')`: every joint angle uniform over its
-    full anatomical range; training draws 'realistic' poses). At n=64: 12 named + 52 extreme.
+    full anatomical range; training draws 'realistic' poses by default, the shipped checkpoint's last phase a
+    50/50 mix of realistic and extreme, from other seeds). At n=64: 12 named + 52 extreme.
   - shape: group (i // 2) % 4 of SHAPE_GROUPS: tall (>= 1.85 m), short (<= 1.55 m), male (gender <= 0.25),
     female (gender >= 0.75), drawn from the calibrated population by `sample_betas`.
   - global orientation uniform over SO(3) (upside-down bodies included); translation uniform in
@@ -31,7 +32,8 @@ protocol the paper follows) uses the same sigma (0.01) but draws its "uniform" h
 boxes rather than the body's box; the body box is the paper's wording ("uniformly sampled around the body")
 and does not depend on the model's partition, so models with different boxes see the same points.
 Shapes come from the same population bank as training shapes (`sample_betas`, 1024 bodies): what training
-never sees is the pose distribution (extreme / named), the orientations and the shape-group extremes.
+never sees are the validation bodies themselves (their seeds), the named poses, the orientations and the shape-group
+extremes (and, with the default `pose_mode='realistic'`, the extreme pose distribution).
 
 Ground truth: `volsmpl.groundtruth.batch_mesh_sdf` (exact distance; sign from libigl's exact generalised
 winding number by default), cached in `<cache_dir>/gt_<key>.npz` with key = sha256 of (vertices, faces,
@@ -84,7 +86,7 @@ import torch
 from .groundtruth import SIGN_MODES
 
 #: seed of the validation set (PosePrior's 316 validation bodies in the paper). Training uses other seeds
-#: and 'realistic' poses; do not train on bodies from this seed.
+#: (and 'realistic' or 'mixed' poses); do not train on bodies from this seed.
 VAL_SEED = 316
 
 #: shape groups of the validation set, cycled every 2 bodies: keyword arguments of `sample_betas`

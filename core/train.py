@@ -1,7 +1,7 @@
 """Training of the volumetric body model (paper Sec. 3.4): `volsmpl train`.
 
-Every step draws B bodies (realistic random poses within joint limits, shapes from Anny's calibrated
-population), per part 256 points uniform in its padded box and 256 near the surface, exact signed
+Every step draws B bodies (random poses within joint limits: `pose_mode` 'realistic' by default, 'mixed' makes
+a share `extreme_fraction` of them extreme; shapes from Anny's calibrated population), per part 256 points uniform in its padded box and 256 near the surface, exact signed
 distances to the posed mesh (open3d BVH distance; sign from libigl's fast winding number, which calls
 self-overlapping parts inside, their union, like the min over parts), and minimises eq. 3:
 
