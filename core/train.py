@@ -1,9 +1,10 @@
 """Training of the volumetric body model (paper Sec. 3.4): `volsmpl train`.
 
-Every step draws B bodies (random poses within joint limits: `pose_mode` 'realistic' by default, 'mixed' makes
-a share `extreme_fraction` of them extreme; shapes from Anny's calibrated population), per part 256 points uniform in its padded box and 256 near the surface, exact signed
-distances to the posed mesh (open3d BVH distance; sign from libigl's fast winding number, which calls
-self-overlapping parts inside, their union, like the min over parts), and minimises eq. 3:
+Every step draws B bodies (random poses within joint limits: `pose_mode` 'realistic' by default, 'mixed'
+makes a share `extreme_fraction` of them extreme; shapes from Anny's calibrated population), per part 256
+points uniform in its padded box and 256 near the surface, exact signed distances to the posed mesh (open3d
+BVH distance; sign from libigl's fast winding number, which calls self-overlapping parts inside, their union,
+like the min over parts), and minimises eq. 3:
 
     L = mean (sgn(d~) - sgn(d))^2  +  abs_weight * mean (|d~| - |d|)^2
 
@@ -60,7 +61,7 @@ import torch
 import torch.distributed as dist
 
 from .body.model import create_body
-from .body.poses import POSE_MODES, sample_poses
+from .body.poses import check_pose_mode, sample_poses
 from .body.shapes import sample_betas
 from .checkpoint import load_checkpoint, save_checkpoint
 from .groundtruth import SIGN_MODES, batch_mesh_sdf, sample_training_queries
@@ -115,9 +116,7 @@ class TrainConfig:
             raise ValueError(f"sign_loss must be 'ste' or 'logistic', got {self.sign_loss!r}")
         if not (self.sign_tau > 0 and self.sign_weight >= 0):
             raise ValueError(f"sign_tau={self.sign_tau} must be > 0 (metres) and sign_weight={self.sign_weight} >= 0.")
-        if self.pose_mode not in POSE_MODES or not 0.0 <= self.extreme_fraction <= 1.0:
-            raise ValueError(f"pose_mode must be one of {POSE_MODES} (got {self.pose_mode!r}) and extreme_fraction in "
-                             f"[0, 1] (got {self.extreme_fraction}).")
+        check_pose_mode(self.pose_mode, self.extreme_fraction)
         if self.residual not in ("signed", "abs"):
             raise ValueError(f"residual must be 'signed' or 'abs', got {self.residual!r}")
         if self.model_kind == "coap" and isinstance(self.model, VolumeConfig):

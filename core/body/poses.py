@@ -79,6 +79,14 @@ def body_pose_to_euler(body_pose: torch.Tensor) -> np.ndarray:
 POSE_MODES = ("realistic", "extreme", "mixed")
 
 
+def check_pose_mode(mode: str, extreme_fraction: float) -> None:
+    """Raise ValueError unless `mode` is one of POSE_MODES and `extreme_fraction` lies in [0, 1]."""
+    if mode not in POSE_MODES:
+        raise ValueError(f"pose_mode must be one of {POSE_MODES}, got {mode!r}")
+    if not 0.0 <= extreme_fraction <= 1.0:
+        raise ValueError(f"extreme_fraction must lie in [0, 1], got {extreme_fraction}")
+
+
 def sample_euler(n: int, seed: int | None = None, mode: str = "realistic",
                  extreme_fraction: float = 0.5) -> np.ndarray:
     """Random joint angles within JOINT_LIMITS, (n, 23, 3).
@@ -89,10 +97,7 @@ def sample_euler(n: int, seed: int | None = None, mode: str = "realistic",
     mode 'mixed': per body, with prob. `extreme_fraction` an extreme pose, else a realistic one (the
     realistic bodies are those mode 'realistic' draws from the same seed).
     """
-    if mode not in POSE_MODES:
-        raise ValueError(f"mode must be one of {POSE_MODES}, got {mode!r}")
-    if not 0.0 <= extreme_fraction <= 1.0:
-        raise ValueError(f"extreme_fraction must lie in [0, 1], got {extreme_fraction}")
+    check_pose_mode(mode, extreme_fraction)
     rng = np.random.default_rng(seed)
     lo, hi = _LIMITS[..., 0], _LIMITS[..., 1]
     uni = rng.uniform(lo, hi, size=(n, *lo.shape))
