@@ -90,8 +90,9 @@ class TrainConfig:
     pose_mode: str = "realistic"    # training poses: 'realistic', 'extreme' or 'mixed' (volsmpl.body.poses.sample_euler)
     extreme_fraction: float = 0.5   # pose_mode 'mixed': share of bodies with extreme poses
     global_orient_scale: float = 0.0  # rad sd of random global orientation (parts are in local frames anyway)
-    gt_sign: str = "fast_winding"   # ground-truth sign: 'fast_winding' / 'winding' (libigl; self-overlaps inside) or 'raycast'
-    gt_rays: int = 5                # ray-voting rays for gt_sign='raycast'
+    gt_sign: str = "ray_winding"    # ground-truth sign: winding number (self-overlaps inside) counted along rays
+                                    # ('ray_winding', exact, fastest), or libigl's 'fast_winding' / 'winding'; or 'raycast' parity
+    gt_rays: int = 3                # rays of the vote for gt_sign='ray_winding' / 'raycast' (odd)
     micro_batch: int = 2            # bodies per forward/backward; gradients accumulate to the same full-batch step
     encoder_bf16: bool = False      # bfloat16 autocast of the PointNet encoder (CPU speed; see VolumetricSMPLNet)
     seed: int = 0

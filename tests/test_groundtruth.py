@@ -184,7 +184,7 @@ def test_winding_torch_in_torch_out(cube):
 
 # ------------------------------------------------------------------ signed distance
 @needs_o3d
-@pytest.mark.parametrize("sign", ["raycast", "winding", "fast_winding"])
+@pytest.mark.parametrize("sign", ["raycast", "winding", "fast_winding", "ray_winding"])
 def test_cube_sdf_exact(cube, sign, rng):
     p = np.concatenate([rng.uniform(-1.0, 1.0, (1500, 3)), rng.uniform(-0.52, 0.52, (500, 3))])
     d = gt.mesh_sdf(*cube, p, sign=sign)
@@ -217,6 +217,48 @@ def test_raycast_sign_agrees_with_winding(nsamples, rng):
     agree = (d < 0) == (w > 0.5)
     assert agree.mean() >= (0.995 if nsamples == 1 else 1.0)
     assert (np.round(w) == inside_cells(p, L_CELLS)).all()
+
+
+@needs_o3d
+@pytest.mark.parametrize("nsamples", [1, 3])
+def test_ray_winding_is_the_exact_integer_winding_number(nsamples, rng):
+    v, f = voxel_mesh(L_CELLS)  # grid points: rays through edges and vertices are likely, axis-aligned faces
+    p = np.concatenate([rng.uniform(-0.5, 3.5, (2000, 3)), np.round(rng.uniform(-0.5, 3.5, (500, 3)) * 4) / 4 + 0.125,
+                        np.round(rng.uniform(-0.5, 3.5, (500, 3)) * 2) / 2])  # also on the cells' corners and edges' lines
+    p = p[off_surface(p, v, f, 1e-4)]
+    w = gt.ray_winding_number(v, f, p, nsamples=nsamples)
+    assert w.dtype == np.int64
+    np.testing.assert_array_equal(w, inside_cells(p, L_CELLS).astype(np.int64))
+    np.testing.assert_array_equal(w, np.round(gt.winding_number(v, f, p)))
+
+
+@needs_o3d
+def test_ray_winding_hollow_shell_and_inverted_pocket(cube, rng):
+    # a hollow cube (outer cube + inward-facing inner cube): shell w = 1, cavity w = 0; a lone inverted cube: w = -1
+    v, f = cube
+    shell_v, shell_f = np.concatenate([v, 0.5 * v]), np.concatenate([f, f[:, ::-1] + len(v)])
+    cavity = rng.uniform(-0.2, 0.2, (200, 3))
+    shell = rng.uniform(-0.45, 0.45, (2000, 3))
+    shell = shell[np.abs(shell).max(1) > 0.3]
+    for pts, expect in ((cavity, 0), (shell, 1)):
+        np.testing.assert_array_equal(gt.ray_winding_number(shell_v, shell_f, pts), expect)
+        np.testing.assert_allclose(gt.winding_number(shell_v, shell_f, pts), expect, atol=1e-9)
+        assert ((gt.mesh_sdf(shell_v, shell_f, pts, sign="ray_winding") < 0) == bool(expect)).all()
+    np.testing.assert_array_equal(gt.ray_winding_number(v, f[:, ::-1], cavity), -1)
+    d = gt.mesh_sdf(v, f[:, ::-1], cavity, sign="ray_winding", check_closed=False)
+    np.testing.assert_allclose(d, np.abs(box_sdf(cavity, 0.5)), atol=2e-6)  # w = -1 is outside: positive distance
+
+
+@needs_o3d
+def test_ray_winding_torch_shapes_and_errors(cube):
+    v, f = cube
+    w = gt.ray_winding_number(torch.as_tensor(v), torch.as_tensor(f), torch.zeros(2, 5, 3))
+    assert torch.is_tensor(w) and w.shape == (2, 5) and w.dtype == torch.int64 and (w == 1).all()
+    assert gt.ray_winding_number(v, f, np.zeros((0, 3))).shape == (0,)
+    with pytest.raises(ValueError, match="odd"):
+        gt.ray_winding_number(v, f, np.zeros((1, 3)), nsamples=2)
+    with pytest.raises(ValueError, match="non-finite"):
+        gt.ray_winding_number(v, f, np.array([[0.0, np.inf, 0.0]]))
 
 
 @needs_o3d
@@ -253,7 +295,8 @@ def test_self_overlap_is_inside_for_winding_outside_for_parity(cube, rng):
     v2, f2 = np.concatenate([v, v + [0.5, 0.1, 0.1]]), np.concatenate([f, f + len(v)])  # no coplanar faces
     p = np.stack([rng.uniform(0.05, 0.45, 200), rng.uniform(-0.35, 0.45, 200), rng.uniform(-0.35, 0.45, 200)], 1)
     np.testing.assert_allclose(gt.winding_number(v2, f2, p), 2.0, atol=1e-9)
-    for sign in ("winding", "fast_winding"):
+    np.testing.assert_array_equal(gt.ray_winding_number(v2, f2, p), 2)
+    for sign in ("winding", "fast_winding", "ray_winding"):
         assert (gt.mesh_sdf(v2, f2, p, sign=sign) < 0).all()
     assert (gt.mesh_sdf(v2, f2, p, sign="raycast") > 0).all()  # parity: an even number of crossings
 
@@ -421,6 +464,8 @@ def test_default_body_raycast_sign_matches_winding(default_body_mesh):
     # the two disagree, and the winding number (union semantics) is the one that calls the point inside
     assert ((d[sure] < 0) != (w[sure] > 0.5)).le(w[sure].round() >= 2).all()
     assert 0.2 < (d < 0).float().mean() < 0.8
+    # counted along rays, the winding number is the same integer wherever the point is off the surface
+    assert torch.equal(gt.ray_winding_number(v[0], f, q[sure]), w[sure].round().long())
 
 
 def test_surface_samples_uniform_on_a_triangle():
