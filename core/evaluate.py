@@ -35,15 +35,17 @@ Shapes come from the same population bank as training shapes (`sample_betas`, 10
 never sees are the validation bodies themselves (their seeds), the named poses, the orientations and the shape-group
 extremes (and, with the default `pose_mode='realistic'`, the extreme pose distribution).
 
-Ground truth: `volsmpl.groundtruth.batch_mesh_sdf` (exact distance; sign from libigl's exact generalised
-winding number by default), cached in `<cache_dir>/gt_<key>.npz` with key = sha256 of (vertices, faces,
-points, sign mode): any change of the bodies, the body model, the points or the sign mode is a cache miss.
-The winding number calls the overlap of self-intersecting parts (hand inside the torso, pressed thighs)
+Ground truth: `volsmpl.groundtruth.batch_mesh_sdf` (exact distance; sign from the exact integer winding number
+of the closed posed mesh, counted along 3 rays by default: `gt_sign='ray_winding'`), cached in
+`<cache_dir>/gt_<key>.npz` with key = sha256 of (vertices, faces, points, sign mode): any change of the
+bodies, the body model, the points or the sign mode is a cache miss. The winding number calls the overlap of self-intersecting parts (hand inside the torso, pressed thighs)
 inside, the union of the parts, which is what a min-over-parts volumetric model represents; ray parity
 (`gt_sign='raycast'`) calls it outside. On four extreme validation bodies (4k points each) the two signs
 disagreed on 0.2-2.3% of the points (IoU 0.92-0.99 between them), the size of the differences Table 1
-reports. The exact winding number takes ~5 s per body at 60k points on one core (~5 min for 64 bodies,
-once: cached); figures in this project before 2026-11-22 evening used 'raycast'.
+reports. libigl's exact generalised winding number (`gt_sign='winding'`) gives the same signs on all 3.84M
+validation points (and the same distances) but takes ~5 s per body at 60k points on one core (~5 min for 64
+bodies) against 25 s for all 64 with 'ray_winding' (2 busy cores); either is computed once and cached. Figures in
+this project before 2026-11-22 evening used 'raycast', until 2026-11-23 'winding'.
 
 Metrics, per body, then the plain mean over bodies (all bodies have the same number of points, so the
 MSE means equal the means over all points):
@@ -130,7 +132,7 @@ class EvalConfig:
         n_points: query points per body (60k). surface_fraction: share of near-surface points (0.5).
         bbox_padding: padding of the uniform sampling box around the posed body, metres (0.05).
         surface_sigma: std of the Gaussian offsets of near-surface points, metres (0.01).
-        gt_sign / gt_nsamples: sign mode and rays of `batch_mesh_sdf` ('winding'; 5 rays for 'raycast').
+        gt_sign / gt_nsamples: sign mode and rays of `batch_mesh_sdf` ('ray_winding' with 3 rays).
         batch_size: bodies per predictor call. device: 'cpu' or 'cuda' for the predictor.
         cache_dir: ground-truth cache folder (None: `default_cache_dir()`); use_cache: read/write it.
         timing: measure time and memory (checkpoint/volume evaluations only); timing_repeats / timing_warmup:
@@ -145,8 +147,8 @@ class EvalConfig:
     surface_fraction: float = 0.5
     bbox_padding: float = 0.05
     surface_sigma: float = 0.01
-    gt_sign: str = "winding"
-    gt_nsamples: int = 5
+    gt_sign: str = "ray_winding"
+    gt_nsamples: int = 3
     batch_size: int = 8
     device: str = "cpu"
     cache_dir: Optional[str] = None
@@ -296,8 +298,8 @@ def query_points(vertices: torch.Tensor, faces, n_points: int = 60000, seed: int
 
 
 # ---------------------------------------------------------------------------------------------- ground truth
-def ground_truth(vertices: torch.Tensor, faces, points: torch.Tensor, sign: str = "winding", nsamples: int = 5,
-                 cache_dir: str | Path | None = None, use_cache: bool = True) -> torch.Tensor:
+def ground_truth(vertices: torch.Tensor, faces, points: torch.Tensor, sign: str = "ray_winding",
+                 nsamples: int = 3, cache_dir: str | Path | None = None, use_cache: bool = True) -> torch.Tensor:
     """Exact SDF (B, N) float32 of points (B, N, 3) w.r.t. the meshes (vertices (B, V, 3), faces (F, 3)),
     by `groundtruth.batch_mesh_sdf`, cached as `<cache_dir>/gt_<key>.npz` (key: module docstring)."""
     from .groundtruth import batch_mesh_sdf
@@ -726,8 +728,9 @@ def add_parser(sub):
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice); "
                    "1 gives stable CPU timings on a busy machine")
     p.add_argument("--gt-sign", default=d.gt_sign, choices=SIGN_MODES,
-                   help="ground-truth sign: the generalised winding number through libigl (exact, or its fast approximation; "
-                        "self-overlaps of a posed mesh are inside) or ray parity (calls them outside); cached")
+                   help="ground-truth sign: the winding number of the posed mesh (self-overlaps inside), counted along "
+                        "rays (default, exact) or through libigl (exact, or its fast approximation), or ray parity "
+                        "(calls self-overlaps outside); cached")
     p.add_argument("--cache-dir", default=None, help=f"ground-truth cache (default {default_cache_dir()})")
     p.add_argument("--no-cache", action="store_true", help="recompute the ground truth, do not write the cache")
     p.add_argument("--out", default=None, help="write the results as JSON here")
