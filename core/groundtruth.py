@@ -147,9 +147,10 @@ def winding_number(vertices, faces, points, fast: bool = False):
     return _per_point(igl_winding, vertices, faces, points)
 
 
-def _per_point(fn, vertices, faces, points):
+def _per_point(fn, vertices, faces, points, integer: bool = False):
     """Validate a mesh and points (numpy or torch), call fn(v (V, 3) f64, f (F, 3) i64, p (N, 3) f64) -> (N,) for
-    N > 0, reshape to the points' leading shape; torch out for torch points (their device/dtype)."""
+    N > 0, reshape to the points' leading shape; torch out for torch points (their device, and their dtype unless
+    `integer`: int64 values, numpy int64 or torch int64)."""
     v = _to_numpy(vertices, "vertices", np.float64)
     f = _to_numpy(faces, "faces", np.int64)
     p = _to_numpy(points, "points", np.float64)
@@ -157,9 +158,11 @@ def _per_point(fn, vertices, faces, points):
     _check_points(p)
     lead = p.shape[:-1]
     p = p.reshape(-1, 3)
-    out = fn(v, f, p) if len(p) else np.zeros(0, dtype=np.float64)
+    out = fn(v, f, p) if len(p) else np.zeros(0, dtype=np.int64 if integer else np.float64)
     out = out.reshape(lead)
-    return _wrap_like(out, points) if torch.is_tensor(points) else out
+    if not torch.is_tensor(points):
+        return out
+    return torch.as_tensor(out, device=points.device) if integer else _wrap_like(out, points)
 
 
 def winding_number_reference(vertices, faces, points, chunk: int = 1 << 21):
@@ -308,18 +311,8 @@ def ray_winding_number(vertices, faces, points, nsamples: int = 3):
         (N,) / (...) integer winding numbers: torch int64 on the points' device for torch points, else numpy int64.
     """
     _validate_sign("ray_winding", nsamples)
-
-    def count(v, f, p):
-        return _ray_winding(raycasting_scene(v, f), v, f, p, nsamples)
-    v = _to_numpy(vertices, "vertices", np.float64)
-    f = _to_numpy(faces, "faces", np.int64)
-    p = _to_numpy(points, "points", np.float64)
-    _check_mesh(v, f)
-    _check_points(p)
-    lead = p.shape[:-1]
-    p = p.reshape(-1, 3)
-    out = (count(v, f, p) if len(p) else np.zeros(0, dtype=np.int64)).reshape(lead)
-    return torch.as_tensor(out, device=points.device) if torch.is_tensor(points) else out
+    return _per_point(lambda v, f, p: _ray_winding(raycasting_scene(v, f), v, f, p, nsamples),
+                      vertices, faces, points, integer=True)
 
 
 def _validate_sign(sign: str, nsamples: int) -> None:
