@@ -465,7 +465,8 @@ def sample_surface(vertices: torch.Tensor, faces: torch.Tensor, n: int, face_ids
 
 def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int = 256, n_surface: int = 256,
                             sigma: float | Sequence[float] = DEFAULT_SURFACE_SIGMA, face_ids_per_part=None,
-                            generator: torch.Generator | None = None):
+                            generator: torch.Generator | None = None, n_body: int = 0,
+                            body_sigma: float | Sequence[float] = (0.005, 0.01)):
     """Training queries as the paper (Sec. 3.4, following COAP): per part, uniform box + near-surface points.
 
     For each body b and part k:
@@ -473,7 +474,11 @@ def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int
         world by G_k: x = R x_local + t with R = G[..., :3, :3], t = G[..., :3, 3];
       - n_surface points near the surface: area-weighted uniform samples on the part's own faces
         (`face_ids_per_part[k]`, e.g. `Partition.tight_face_ids`; the whole mesh if None) plus isotropic
-        Gaussian offsets N(0, sigma^2 I).
+        Gaussian offsets N(0, sigma^2 I);
+
+    and, after all parts, n_body points near the surface of the whole mesh (area-weighted, offsets from
+    `body_sigma`), the distribution of the evaluation's near-surface set: equal counts per part leave the
+    large parts (pelvis, belly, chest) with the sparsest samples per unit area, where the errors are largest.
 
     On sigma: the paper writes N(0, 0.1) without units. 0.1 m is far too coarse near a 1.7 m body (a hand is
     ~2 cm thick, so most "near-surface" points would land far from the part or on another part), so sigma is
@@ -489,11 +494,12 @@ def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int
         box_min, box_max (B, K, 3) padded boxes in part frames (e.g. `Partition.boxes`).
         n_uniform, n_surface: samples per part. sigma: float or sequence of floats, metres.
         face_ids_per_part: optional K face-index arrays. generator: torch.Generator for reproducibility
-        (its device is where the sampling happens).
+        (its device is where the sampling happens). n_body, body_sigma: whole-body near-surface samples
+        (drawn after the part blocks, so n_body = 0 leaves those unchanged).
     Returns:
-        (B, K * (n_uniform + n_surface), 3) world points, laid out part by part, each part's block being
-        [n_uniform box points, n_surface near-surface points in sigma order]; reshape to
-        (B, K, n_uniform + n_surface, 3) to get them per part. Torch on the vertices' device/dtype for torch
+        (B, K * (n_uniform + n_surface) + n_body, 3) world points, laid out part by part, each part's block
+        being [n_uniform box points, n_surface near-surface points in sigma order], then the n_body block
+        (body_sigma order); the first K * (n_uniform + n_surface) reshape to (B, K, n_uniform + n_surface, 3). Torch on the vertices' device/dtype for torch
         input (numpy float for numpy input).
     """
     like = vertices
@@ -511,11 +517,12 @@ def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int
         raise ValueError("box_max < box_min for some part: pass the boxes as (box_min, box_max).")
     if face_ids_per_part is not None and len(face_ids_per_part) != K:
         raise ValueError(f"face_ids_per_part has {len(face_ids_per_part)} entries but G has K={K} parts.")
-    if n_uniform < 0 or n_surface < 0:
-        raise ValueError(f"n_uniform={n_uniform}, n_surface={n_surface} must be >= 0.")
+    if n_uniform < 0 or n_surface < 0 or n_body < 0:
+        raise ValueError(f"n_uniform={n_uniform}, n_surface={n_surface}, n_body={n_body} must be >= 0.")
     if not torch.isfinite(vt).all():
         raise ValueError("vertices contain NaN/inf; the posed mesh is broken (check the pose/shape parameters).")
     split = _sigma_split(sigma, n_surface)
+    body_split = _sigma_split(body_sigma, n_body)
     dev = generator.device if generator is not None else vt.device
     f64 = dict(dtype=torch.float64, device=dev)
     Gd, lod, hid = Gt.detach().to(**f64), lo.detach().to(**f64), hi.detach().to(**f64)
@@ -531,6 +538,10 @@ def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int
         noise = torch.randn(B, K, n_surface, 3, generator=generator, **f64) * scale[:, None]
         blocks.append(surf + noise)
     out = torch.cat(blocks, dim=2).reshape(B, K * (n_uniform + n_surface), 3)
+    if n_body:
+        surf = sample_surface(vt.detach().to(**f64), faces, n_body, None, 1, generator)[:, 0]
+        scale = torch.cat([torch.full((m,), s, **f64) for s, m in body_split])
+        out = torch.cat([out, surf + torch.randn(B, n_body, 3, generator=generator, **f64) * scale[:, None]], dim=1)
     if torch.is_tensor(like):
         dtype = like.dtype if like.is_floating_point() else torch.get_default_dtype()
         return out.to(device=like.device, dtype=dtype)

@@ -2,9 +2,10 @@
 
 Every step draws B bodies (random poses within joint limits: `pose_mode` 'realistic' by default, 'mixed'
 makes a share `extreme_fraction` of them extreme; shapes from Anny's calibrated population), per part 256
-points uniform in its padded box and 256 near the surface, exact signed distances to the posed mesh (open3d
-BVH distance; sign from libigl's fast winding number, which calls self-overlapping parts inside, their union,
-like the min over parts), and minimises eq. 3:
+points uniform in its padded box and 256 near the surface (optionally `n_body_surface` more per body near the
+whole surface, area-weighted like the evaluation's near-surface set), exact signed distances to the posed mesh
+(open3d BVH distance; sign from the winding number, which calls self-overlapping parts inside, their union, like
+the min over parts), and minimises eq. 3:
 
     L = mean (sgn(d~) - sgn(d))^2  +  abs_weight * mean (|d~| - |d|)^2
 
@@ -82,6 +83,8 @@ class TrainConfig:
     n_uniform: int = 256            # per part, uniform in its padded box (paper)
     n_surface: int = 256            # per part, near the surface (paper)
     surface_sigma: tuple = (0.01, 0.05)  # metres; see volsmpl.groundtruth
+    n_body_surface: int = 0         # per body, near the whole surface, area-weighted (the eval's near-surface law)
+    body_surface_sigma: tuple = (0.005, 0.01)  # metres, offsets of those
     sign_tau: float = 0.01          # metres: scale of the sign term (STE gradient 1/tau; logistic logit -d/tau)
     sign_loss: str = "ste"          # 'ste' (eq. 3's l2 of signs, straight-through) or 'logistic' (module docstring)
     sign_weight: float = 1.0        # weight of the sign term
@@ -129,6 +132,7 @@ class TrainConfig:
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
         d["surface_sigma"] = list(self.surface_sigma)
+        d["body_surface_sigma"] = list(self.body_surface_sigma)
         d["model"] = self.model.to_dict()
         return d
 
@@ -147,8 +151,9 @@ class TrainConfig:
             d["model"] = CoapConfig.from_dict(d.get("model", {}))
         elif "model" in d:
             d["model"] = VolumeConfig.from_dict(d["model"])
-        if "surface_sigma" in d:
-            d["surface_sigma"] = tuple(d["surface_sigma"])
+        for key in ("surface_sigma", "body_surface_sigma"):
+            if key in d:
+                d[key] = tuple(d[key])
         return cls(**d)
 
 
@@ -230,7 +235,8 @@ def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> d
         G = partition.part_transforms(out.full_pose, out.joints)
         bmin, bmax = partition.boxes(out.vertices, G)
         pts = sample_training_queries(out.vertices, body.faces_tensor, G, bmin, bmax, cfg.n_uniform, cfg.n_surface,
-                                      sigma=cfg.surface_sigma, face_ids_per_part=partition.tight_face_ids, generator=g)
+                                      sigma=cfg.surface_sigma, face_ids_per_part=partition.tight_face_ids, generator=g,
+                                      n_body=cfg.n_body_surface, body_sigma=cfg.body_surface_sigma)
         gt = batch_mesh_sdf(out.vertices, body.faces, pts, sign=cfg.gt_sign, nsamples=cfg.gt_rays, check_closed=False)
     posed = {"vertices": out.vertices, "joints": out.joints, "full_pose": out.full_pose}
     return {"params": params, "posed": posed, "points": pts, "sdf": gt, "seed": seed}

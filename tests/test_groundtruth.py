@@ -407,6 +407,29 @@ def test_sampler_without_part_faces_and_sigma_zero(two_part_scene):
     assert abs(frac_big - 0.8) < 0.03
 
 
+def test_sampler_whole_body_block(two_part_scene):
+    """n_body appends area-weighted whole-mesh samples with body_sigma offsets; the part blocks are unchanged."""
+    verts, f, G, lo, hi, parts = two_part_scene
+    kw = dict(n_uniform=8, n_surface=8, face_ids_per_part=parts)
+    base = gt.sample_training_queries(verts, f, G, lo, hi, generator=torch.Generator().manual_seed(4), **kw)
+    q = gt.sample_training_queries(verts, f, G, lo, hi, generator=torch.Generator().manual_seed(4), n_body=3000,
+                                   body_sigma=0.0, **kw)
+    assert q.shape == (2, 2 * 16 + 3000, 3) and torch.equal(q[:, :32], base)
+    pts = q[0, 32:].numpy()
+    d = np.minimum(np.abs(box_sdf(pts, 1.0)), np.abs(box_sdf(pts - [5.0, 0, 0], 0.5)))
+    assert d.max() < 1e-9  # on the mesh
+    assert abs((pts[:, 0] < 2.5).mean() - 0.8) < 0.03  # the big box has 4x the small one's area
+    sigma = (0.01, 0.03)
+    q = gt.sample_training_queries(verts, f, G, lo, hi, generator=torch.Generator().manual_seed(5), n_body=8000,
+                                   body_sigma=sigma, **kw)[0, 32:].numpy()
+    big = np.abs(q).max(1) < 1.2  # around the big box; its faces are flat, so the SDF ~ the normal offset
+    for s, block, inside in zip(sigma, (q[:4000], q[4000:]), (big[:4000], big[4000:])):
+        sdf = box_sdf(block[inside], 1.0)
+        assert abs(sdf.std() / s - 1) < 0.12, (s, sdf.std())
+    with pytest.raises(ValueError, match="n_body"):
+        gt.sample_training_queries(verts, f, G, lo, hi, n_body=-1)
+
+
 def test_sampler_reproducible_and_typed(two_part_scene):
     verts, f, G, lo, hi, parts = two_part_scene
     run = lambda seed, **kw: gt.sample_training_queries(verts, f, G, lo, hi, n_uniform=16, n_surface=16,

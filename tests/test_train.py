@@ -111,6 +111,22 @@ def test_batch_deterministic_and_ground_truth(body):
     assert ((a["sdf"][0, ::8] < 0) == inside).float().mean() > 0.99
 
 
+def test_batch_whole_body_surface_block(body):
+    """n_body_surface appends area-weighted queries near the whole surface; the part blocks stay as they were."""
+    import dataclasses
+    cfg = tiny_cfg()
+    part = volsmpl.Partition(body)
+    a = make_batch(cfg, body, part, 5)
+    c = make_batch(dataclasses.replace(cfg, n_body_surface=64, body_surface_sigma=(0.0,)), body, part, 5)
+    n = a["points"].shape[1]
+    assert c["points"].shape == (2, n + 64, 3) and torch.equal(c["points"][:, :n], a["points"])
+    out = body(**c["params"])
+    from volsmpl.groundtruth import mesh_sdf
+    d = mesh_sdf(out.vertices[1].detach().numpy(), body.faces, c["points"][1, n:].numpy())
+    assert abs(d).max() < 1e-6  # offsets 0: on the surface
+    assert torch.allclose(c["sdf"][1, n:], torch.as_tensor(d, dtype=c["sdf"].dtype), atol=1e-6)
+
+
 def test_micro_batches_give_the_full_batch_gradient(body):
     cfg = tiny_cfg()
     torch.manual_seed(0)
