@@ -215,5 +215,9 @@ def test_part_subset_code_equals_naive_concat():
     torch.testing.assert_close(net.decode_dense(x[:, parts], code), _naive(net, x, z)[:, parts])
     with pytest.raises(ValueError, match="K=3"):
         net.fold(z, parts)
+    with pytest.raises(ValueError, match=r"latents are for K=3 parts, expected 2 \(the part subset\)"):
+        net.decode_dense(x[:, parts], code._replace(parts=torch.tensor([0, 2])))
+    with pytest.raises(ValueError, match=r"for K=3 parts, expected 4 \(this network\)"):
+        net.decode_dense(x[:, parts], code._replace(parts=None))
     with pytest.raises(ValueError, match="strictly increasing"):
         net.fold(z[:, :2], torch.tensor([0, 4]))

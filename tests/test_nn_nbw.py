@@ -232,3 +232,9 @@ def test_part_subset_decodes_like_the_naive_decoder(share):
         m.generate(z[:, :2], torch.tensor([3, 1]))
     with pytest.raises(ValueError, match="K=2"):
         m.generate(z, parts)
+    # weights whose part count disagrees with their subset (or with the decoder) are refused at decoding
+    bad = gen._replace(parts=torch.tensor([0, 1, 3]))
+    with pytest.raises(ValueError, match=r"generated weights are for K=2 parts, expected 3 \(the part subset\)"):
+        m.decode_dense(x, bad)
+    with pytest.raises(ValueError, match=r"for K=2 parts, expected 4 \(this decoder\)"):
+        m.decode_dense(x, gen._replace(parts=None))

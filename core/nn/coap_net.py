@@ -48,7 +48,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from .config import JsonConfig
-from .nbw import check_pairs, check_part_subset, count_parameters
+from .nbw import check_code_parts, check_pairs, check_part_subset, count_parameters
 from .pointnet import ResnetPointNet
 
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)
@@ -270,10 +270,7 @@ class CoapNet(nn.Module):
         if not isinstance(code, CoapCode) or len(code.biases) != n_in:
             raise TypeError("CoapNet decoding expects the CoapCode returned by CoapNet.encode/fold of this model")
         B, K = code.z.shape[:2]
-        expect = self.num_parts if code.parts is None else len(code.parts)
-        if K != expect:
-            raise ValueError(f"the code is for K={K} parts, expected {expect} "
-                             f"({'this network' if code.parts is None else 'the part subset'})")
+        check_code_parts(K, self.num_parts, code.parts, "the code's latents", "this network")
         return B, K
 
     def _tables(self, code: CoapCode, with_flag_column: bool) -> List[torch.Tensor]:

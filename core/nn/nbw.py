@@ -46,6 +46,15 @@ def check_part_subset(parts: torch.Tensor, n_parts: int) -> int:
     return parts.numel()
 
 
+def check_code_parts(K: int, n_parts: int, parts: Optional[torch.Tensor], what: str, owner: str) -> None:
+    """A decoding code (`what`, e.g. 'generated weights') made for K parts must match the network's n_parts,
+    or the length of its part subset `parts`; `owner` names the network in the message."""
+    expect = n_parts if parts is None else len(parts)
+    if K != expect:
+        raise ValueError(f"{what} are for K={K} parts, expected {expect} "
+                         f"({owner if parts is None else 'the part subset'})")
+
+
 class NBWWeights(NamedTuple):
     """Generated decoder weights for B bodies x K parts, latent already folded into the biases.
 
@@ -289,10 +298,7 @@ class NBWDecoder(nn.Module):
         if not isinstance(gen, NBWWeights) or len(gen.weights) != self.n_layers:
             raise TypeError("decode expects the NBWWeights returned by NBWDecoder.generate(z) of this model")
         B, K = gen.batch_shape
-        expect = self.n_parts if gen.parts is None else len(gen.parts)
-        if K != expect:
-            raise ValueError(f"generated weights are for K={K} parts, expected {expect} "
-                             f"({'this decoder' if gen.parts is None else 'the part subset'})")
+        check_code_parts(K, self.n_parts, gen.parts, "generated weights", "this decoder")
         return B, K
 
     # ------------------------------------------------------------------ decoding
