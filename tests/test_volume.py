@@ -475,8 +475,8 @@ def test_selfpen_rigid_code_gradient():
     l_rigid, g_rigid = loss_grad(p0, False)
     assert seen == [True, False]
     torch.testing.assert_close(l_full, l_rigid)
-    # 0.956 on this case with the shipped checkpoint (session 10's 0.958, session 7's 0.944, session 6's 0.931; lowest
-    # of the 17: 0.907, sitting_on_heels; median 0.998)
+    # 0.949 on this case with the shipped checkpoint (session 10's 0.958, session 7's 0.944, session 6's 0.931; lowest
+    # of the 17: 0.909, sitting_on_heels; median 0.998)
     assert torch.nn.functional.cosine_similarity(g_full.flatten(), g_rigid.flatten(), dim=0) > 0.88
 
 
@@ -486,12 +486,14 @@ def test_queries_encode_only_parts_holding_points(model):
     """query / query_parts / collision_loss run the encoder only on parts whose boxes hold a query point;
     values and gradients (pose, shape, translation, points) equal those of the all-parts encoding, and a
     later query elsewhere on the same output encodes the missing parts (and equals the full one too)."""
-    b = volsmpl.create_body()
-    vol = volsmpl.attach_volume(b, model=model).eval()
+    # float64: the subset and the all-parts encodings batch the encoder differently (K' vs K parts); in float32
+    # the summation order alone moves the pose gradient by up to 0.4 % (measured with the session-11 checkpoint)
+    b = volsmpl.create_body().to(torch.float64)
+    vol = volsmpl.attach_volume(b, model=model).eval().to(torch.float64)
     encoded = []
     enc = vol.net.encode
     vol.net.encode = lambda local, *a: encoded.append(local.shape[1]) or enc(local, *a)
-    p = random_pose(1, seed=21)
+    p = {k: v.to(torch.float64) for k, v in random_pose(1, seed=21).items()}
     hand = vol.partition.tight_vertices[vol.partition.table.part_names.index("right_hand")]
     g = torch.Generator().manual_seed(0)
 
@@ -518,8 +520,8 @@ def test_queries_encode_only_parts_holding_points(model):
     encoded.clear()
     got = run(near_hand, False)
     assert 0 < encoded[0] < vol.num_parts and len(encoded) == 1  # query_parts reused query's subset encoding
-    for a, c in zip(got, ref):  # float32: the encoder's batch differs (K' vs K parts), so the sums' order
-        torch.testing.assert_close(a, c, rtol=1e-4, atol=1e-5)
+    for a, c in zip(got, ref):
+        torch.testing.assert_close(a, c, rtol=1e-9, atol=1e-10)
     assert ref[0].lt(0).any() if vol.is_sdf else ref[0].gt(vol.level).any()  # some points inside the hand
     # a constant output: the subset encoding is cached and grows with a query over the whole body
     with torch.no_grad():
@@ -530,7 +532,7 @@ def test_queries_encode_only_parts_holding_points(model):
         d = vol.query(out, everywhere)
         assert encoded == [vol.num_parts]
         torch.testing.assert_close(d, vol.query_encoded(vol._encode(out, None), everywhere))
-        far = torch.full((1, 4, 3), 9.0)
+        far = torch.full((1, 4, 3), 9.0, dtype=torch.float64)
         encoded.clear()
         out2 = b(**{**p, "transl": p["transl"] + 0.5})
         d_far = vol.query(out2, far)  # no point in any box: no encoder run, the analytic distance
