@@ -407,6 +407,12 @@ def _sigma_split(sigma, n: int) -> list[tuple[float, int]]:
     return [(s, base + (i < rem)) for i, s in enumerate(sig)]
 
 
+def _gaussian_offsets(split: list[tuple[float, int]], lead: tuple, generator, f64: dict) -> torch.Tensor:
+    """(*lead, n, 3) isotropic offsets, the i-th run of split's counts m_i with standard deviation s_i."""
+    scale = torch.cat([torch.full((m,), s, **f64) for s, m in split])
+    return torch.randn(*lead, len(scale), 3, generator=generator, **f64) * scale[:, None]
+
+
 def _triangle_areas(tri: torch.Tensor) -> torch.Tensor:
     """tri (..., 3, 3) -> areas (...)."""
     return 0.5 * torch.linalg.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :], dim=-1).norm(dim=-1)
@@ -499,8 +505,8 @@ def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int
     Returns:
         (B, K * (n_uniform + n_surface) + n_body, 3) world points, laid out part by part, each part's block
         being [n_uniform box points, n_surface near-surface points in sigma order], then the n_body block
-        (body_sigma order); the first K * (n_uniform + n_surface) reshape to (B, K, n_uniform + n_surface, 3). Torch on the vertices' device/dtype for torch
-        input (numpy float for numpy input).
+        (body_sigma order); the first K * (n_uniform + n_surface) reshape to (B, K, n_uniform + n_surface, 3).
+        Torch on the vertices' device/dtype for torch input (numpy float for numpy input).
     """
     like = vertices
     vt = torch.as_tensor(vertices) if not torch.is_tensor(vertices) else vertices
@@ -534,14 +540,11 @@ def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int
     blocks = [uniform]
     if n_surface:
         surf = sample_surface(vt.detach().to(**f64), faces, n_surface, face_ids_per_part, K, generator)
-        scale = torch.cat([torch.full((m,), s, **f64) for s, m in split])
-        noise = torch.randn(B, K, n_surface, 3, generator=generator, **f64) * scale[:, None]
-        blocks.append(surf + noise)
+        blocks.append(surf + _gaussian_offsets(split, (B, K), generator, f64))
     out = torch.cat(blocks, dim=2).reshape(B, K * (n_uniform + n_surface), 3)
     if n_body:
         surf = sample_surface(vt.detach().to(**f64), faces, n_body, None, 1, generator)[:, 0]
-        scale = torch.cat([torch.full((m,), s, **f64) for s, m in body_split])
-        out = torch.cat([out, surf + torch.randn(B, n_body, 3, generator=generator, **f64) * scale[:, None]], dim=1)
+        out = torch.cat([out, surf + _gaussian_offsets(body_split, (B,), generator, f64)], dim=1)
     if torch.is_tensor(like):
         dtype = like.dtype if like.is_floating_point() else torch.get_default_dtype()
         return out.to(device=like.device, dtype=dtype)
