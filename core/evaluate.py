@@ -42,10 +42,11 @@ bodies, the body model, the points or the sign mode is a cache miss. The winding
 of self-intersecting parts (hand inside the torso, pressed thighs) inside, the union of the parts, which is
 what a min-over-parts volumetric model represents; ray parity (`gt_sign='raycast'`) calls it outside. On
 four extreme validation bodies (4k points each) the two signs disagreed on 0.2-2.3% of the points (IoU
-0.92-0.99 between them), the size of the differences Table 1 reports. libigl's exact generalised winding number (`gt_sign='winding'`) gives the same signs on all 3.84M
-validation points (and the same distances) but takes ~5 s per body at 60k points on one core (~5 min for 64
-bodies) against 25 s for all 64 with 'ray_winding' (2 busy cores); either is computed once and cached. Figures in
-this project before 2026-11-22 evening used 'raycast', until 2026-11-23 'winding'.
+0.92-0.99 between them), the size of the differences Table 1 reports. libigl's exact generalised winding
+number (`gt_sign='winding'`) gives the same signs on all 3.84M validation points (and the same distances)
+but takes ~5 s per body at 60k points on one core (~5 min for 64 bodies) against 25 s for all 64 with
+'ray_winding' (2 busy cores); either is computed once and cached. Figures in this project before 2026-11-22
+evening used 'raycast', until 2026-11-23 'winding'.
 
 Metrics, per body, then the plain mean over bodies (all bodies have the same number of points, so the
 MSE means equal the means over all points):

@@ -532,6 +532,7 @@ def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int
     dev = generator.device if generator is not None else vt.device
     f64 = dict(dtype=torch.float64, device=dev)
     Gd, lod, hid = Gt.detach().to(**f64), lo.detach().to(**f64), hi.detach().to(**f64)
+    vd = vt.detach().to(**f64)
 
     u = torch.rand(B, K, n_uniform, 3, generator=generator, **f64)
     local = lod[:, :, None] + u * (hid - lod)[:, :, None]
@@ -539,11 +540,11 @@ def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int
 
     blocks = [uniform]
     if n_surface:
-        surf = sample_surface(vt.detach().to(**f64), faces, n_surface, face_ids_per_part, K, generator)
+        surf = sample_surface(vd, faces, n_surface, face_ids_per_part, K, generator)
         blocks.append(surf + _gaussian_offsets(split, (B, K), generator, f64))
     out = torch.cat(blocks, dim=2).reshape(B, K * (n_uniform + n_surface), 3)
     if n_body:
-        surf = sample_surface(vt.detach().to(**f64), faces, n_body, None, 1, generator)[:, 0]
+        surf = sample_surface(vd, faces, n_body, None, 1, generator)[:, 0]
         out = torch.cat([out, surf + _gaussian_offsets(body_split, (B,), generator, f64)], dim=1)
     if torch.is_tensor(like):
         dtype = like.dtype if like.is_floating_point() else torch.get_default_dtype()
