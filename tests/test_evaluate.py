@@ -272,7 +272,7 @@ def test_cli_end_to_end(body, tiny_config, tmp_path, capsys):
 @pytest.mark.needs_checkpoint
 def test_shipped_checkpoint_accuracy(tmp_path):
     # regression guard of the shipped asset on the first 4 validation bodies (exact winding-number ground truth);
-    # the shipped asset scores 0.913 here (90.04 on all 64 bodies), session 11's 0.910, session 10's 0.907, session 7's
+    # the shipped asset scores 0.914 here (90.06 on all 64 bodies), session 11's 0.910, session 10's 0.907, session 7's
     # 0.902, session 6's 0.901, session 5's 0.888, step 12,000 0.891: the bar fails a return to session 5's model or
     # anything worse
     res = ev.evaluate_checkpoint(None, n_bodies=4, n_points=8000, cache_dir=str(tmp_path))
