@@ -370,10 +370,8 @@ class Volume(torch.nn.Module):
         frames only (rigid part motion), not through the change of each part's shape code, and the backward
         pass skips the encoder (about half of a step's time). On the 17 shipped self-intersection cases its
         pose gradient has cosine >= 0.97 (median >= 0.997) with the full one for the session-3 checkpoints of both
-        models, >= 0.929 (median 0.998; sitting_on_heels 0.929, hand_behind_into_buttock 0.944) for the
-        session-7 one, >= 0.942 (median 0.998; sitting_on_heels) for the session-10 one, >= 0.909 (median 0.998;
-        sitting_on_heels 0.909, hand_behind_into_buttock 0.949) for the session-11 one, >= 0.879 (median 0.997;
-        sitting_on_heels 0.879, hand_behind_into_buttock 0.963) for the session-12 one.
+        models and >= 0.879 (median 0.997; sitting_on_heels 0.879, hand_behind_into_buttock 0.963) for the
+        VolumetricSMPL checkpoint shipped in session 12 (the checkpoints in between: README, selfpen section).
         Only the parts of overlapping box pairs are encoded (unless the output is encoded already): a
         sample lies in two parts' boxes, and a part that forms no overlapping pair with the sample's
         other parts can neither be involved nor be a partner, so the loss and its gradients are those
