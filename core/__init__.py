@@ -8,7 +8,8 @@
 """
 from .body.model import Body, BodyOutput, create_body
 from .partition import Partition
-from .volume import Volume, attach_volume
+from .attach import attach_volume
+from .volume import Volume
 
 __all__ = ["Body", "BodyOutput", "create_body", "Partition", "Volume", "attach_volume"]
 __version__ = "0.1.0"

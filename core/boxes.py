@@ -1,5 +1,5 @@
 """Geometry of rigidly placed part boxes: containment, pairwise overlap (exact SAT test) and
-uniform sampling of box overlaps (for the self-penetration loss, paper eq. 5 / supp. C.4)."""
+uniform sampling of box overlaps (for the self-penetration loss, paper eq. 8 / supp. D.4)."""
 from __future__ import annotations
 
 import torch

@@ -90,9 +90,11 @@ def save_checkpoint(path: str | os.PathLike, state_dict: Dict[str, torch.Tensor]
 
 
 def checkpoint_model(path: str | os.PathLike) -> str:
-    """Which model a checkpoint holds ('volsmpl' or 'coap'), read from its JSON (weights not loaded)."""
+    """Which registered model kind a checkpoint holds (volsmpl.models), read from its JSON (weights not loaded)."""
+    from .models import kind_of_config
+
     _, cfg, _ = load_checkpoint(path, weights=False)
-    return "coap" if cfg.get("model") == "coap" else "volsmpl"
+    return kind_of_config(cfg)
 
 
 def load_checkpoint(path: str | os.PathLike, expected_fingerprint: Optional[str] = None,

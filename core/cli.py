@@ -15,7 +15,8 @@ SUBCOMMANDS = {
     "body": ("volsmpl.body.cli", "export / inspect / pose the default body"),
     "demo": ("volsmpl.demo", "pose the default body; meshes, part picture, SDF slice and surfaces"),
     "eval": ("volsmpl.evaluate", "evaluate a checkpoint on the validation set (paper Table 1 protocol)"),
-    "selfpen": ("volsmpl.apps.selfpen.cli", "repair self-intersections by pose optimisation (paper Table 4)"),
+    "report": ("volsmpl.report", "write docs/report.md: every result table beside the paper's numbers"),
+    "selfpen": ("volsmpl.apps.selfpen.cli", "repair self-intersections by pose optimisation (paper Table 6)"),
     "train": ("volsmpl.train", "train the volumetric model on the default body (resumable; torchrun for DDP)"),
 }
 

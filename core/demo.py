@@ -53,10 +53,11 @@ def _volume_pictures(args, body, out_dir: Path) -> None:
     from .body.poses import named_pose
     from .render import save_png
     from .slice_view import sdf_slice, surfaces_side_by_side
-    from .volume import DEFAULT_CHECKPOINTS, attach_volume
+    from .attach import attach_volume
+    from .models import model_kind
 
     ckpt = args.checkpoint
-    if ckpt is None and not DEFAULT_CHECKPOINTS["volsmpl"].with_suffix(".safetensors").exists():
+    if ckpt is None and not model_kind("volsmpl").default_checkpoint.with_suffix(".safetensors").exists():
         print("no trained checkpoint ships yet: SDF pictures skipped (train one with `volsmpl train`, "
               "then `volsmpl demo --checkpoint PATH`)")
         return

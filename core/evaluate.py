@@ -1,127 +1,63 @@
-"""Evaluation of a volumetric body model against exact mesh SDFs (paper Table 1 protocol).
+"""Evaluation of a volumetric body model against exact mesh SDFs (paper Table 1 protocol), and `volsmpl eval`.
 
-    from volsmpl.evaluate import evaluate, evaluate_checkpoint, validation_bodies
+    from volsmpl.evaluate import evaluate, evaluate_checkpoint
     res = evaluate_checkpoint("runs/x/ckpt")                  # 64 bodies x 60k points, default settings
     res = evaluate(lambda out, pts: vol.query(out, pts))      # any predictor of SDF (negative inside)
     print(format_table(res)); res.to_dict()                   # JSON-able
     volsmpl eval --checkpoint PATH [--n-bodies 64] [--points 60000] [--out results.json] [--timing]
 
-Validation set (`validation_bodies`): bodies the training sampler never draws, regenerated bit-identically
-from a seed (default VAL_SEED). Body i is built from its own random stream SeedSequence([seed, i]), so
-`validation_bodies(n)` is a prefix of `validation_bodies(m)` for n <= m, independent of n:
-  - pose: odd i < 2 * len(NAMED_POSES) take the named poses in NAMED_POSES order (all 12 at n >= 24);
-    every other body an *extreme* pose (`sample_poses(mode='extreme')`: every joint angle uniform over its
-    full anatomical range; training draws 'realistic' poses by default, the shipped checkpoint's last phase a
-    50/50 mix of realistic and extreme, from other seeds). At n=64: 12 named + 52 extreme.
-  - shape: group (i // 2) % 4 of SHAPE_GROUPS: tall (>= 1.85 m), short (<= 1.55 m), male (gender <= 0.25),
-    female (gender >= 0.75), drawn from the calibrated population by `sample_betas`.
-  - global orientation uniform over SO(3) (upside-down bodies included); translation uniform in
-    [-0.5, 0.5]^3 m.
-`digest(tensors)` is the sha256 of the tensors' names, dtypes, shapes and bytes: equal digests mean
-bit-identical sets (on the same numpy/scipy/torch stack).
+The parts of the protocol live in their own modules:
+  - `volsmpl.validation`: the fixed validation set (bodies, query points, digests);
+  - `volsmpl.groundtruth_cache`: the exact ground-truth SDF of those points, cached on disk;
+  - `volsmpl.metrics`: IoU (near-surface / uniform points) and SDF MSEs, per body then averaged.
+Every result records where and when it was made (`volsmpl.provenance.machine_info`, key 'meta').
 
-Query points (`query_points`), per body, from a per-body torch.Generator (seed SeedSequence([seed, 1, i])),
-float32, laid out [uniform | near-surface]:
-  - round(n * (1 - surface_fraction)) points uniform in the body's axis-aligned bounding box padded by
-    `bbox_padding` (5 cm) on every side;
-  - the rest near the surface: area-weighted uniform samples on the posed mesh + isotropic Gaussian
-    offsets N(0, sigma^2 I), sigma = 1 cm (the paper's protocol follows COAP; COAP's evaluation
-    perturbs surface samples at the centimetre scale, where the "surf." IoU is decided).
-Defaults give the paper's 60k = 30k uniform + 30k near-surface. COAP's released training code (whose
-protocol the paper follows) uses the same sigma (0.01) but draws its "uniform" half inside the padded part
-boxes rather than the body's box; the body box is the paper's wording ("uniformly sampled around the body")
-and does not depend on the model's partition, so models with different boxes see the same points.
-Shapes come from the same population bank as training shapes (`sample_betas`, 1024 bodies): what training
-never sees are the validation bodies themselves (their seeds), the named poses, the orientations and the shape-group
-extremes (and, with the default `pose_mode='realistic'`, the extreme pose distribution).
-
-Ground truth: `volsmpl.groundtruth.batch_mesh_sdf` (exact distance; sign from the exact integer winding number
-of the closed posed mesh, counted along 3 rays by default: `gt_sign='ray_winding'`), cached in
-`<cache_dir>/gt_<key>.npz` with key = sha256 of (vertices, faces, points, sign mode): any change of the
-bodies, the body model, the points or the sign mode is a cache miss. The winding number calls the overlap
-of self-intersecting parts (hand inside the torso, pressed thighs) inside, the union of the parts, which is
-what a min-over-parts volumetric model represents; ray parity (`gt_sign='raycast'`) calls it outside. On
-four extreme validation bodies (4k points each) the two signs disagreed on 0.2-2.3% of the points (IoU
-0.92-0.99 between them), the size of the differences Table 1 reports. libigl's exact generalised winding
-number (`gt_sign='winding'`) gives the same signs on all 3.84M validation points (and the same distances)
-but takes ~5 s per body at 60k points on one core (~5 min for 64 bodies) against 25 s for all 64 with
-'ray_winding' (2 busy cores); either is computed once and cached. Figures in this project before 2026-11-22
-evening used 'raycast', until 2026-11-23 'winding'.
-
-Metrics, per body, then the plain mean over bodies (all bodies have the same number of points, so the
-MSE means equal the means over all points):
-  - IoU(S) = |{pred < 0} & {gt < 0}| / |{pred < 0} | {gt < 0}| over the point set S (1 when both are
-    empty); iou_surf on the near-surface set, iou_unif on the uniform set, iou_mean = their average.
-  - mse_sdf = mean (pred - gt)^2, mse_abs_sdf = mean (|pred| - |gt|)^2 (metres^2), over all points;
-    `_surf` / `_unif` suffixes: over the near-surface / uniform set only. Note ||a| - |b|| <= |a - b|, so
-    mse_abs_sdf <= mse_sdf on any point set; the paper's Table 2 has rows with |SDF| > SDF, so its
-    exact definition must differ (not stated); these are the well-defined ones.
-Resources (optional, `timing=True`): measured in a fresh subprocess on body 0 (batch 1) and all its
-points, under torch.no_grad(): median wall time over `timing_repeats` after `timing_warmup` runs,
-with encoding (partition + PointNet + NBW weights + query) and without (query on a given encoding);
-memory on CUDA = torch.cuda.max_memory_allocated during one encode+query (minus what was allocated
-before); on CPU = peak RSS during the first encode+query minus the RSS just before it (ru_maxrss when
-the query sets the process's high-water mark, else RSS polled every 0.2 ms in a thread).
-On a CPU shared with other busy processes, time with `--threads 1`: OpenMP threads waiting for each other
-made an encode+query 10x slower with 2 threads than with 1 on the 2-core development machine.
-
-Cost (2 shared CPU cores, 64 bodies x 60k points): ground truth ~22 s once (then read from the cache in
-~0.2 s), a randomly initialised default network ~27 s with 1 thread; timing adds ~10 s.
+Resources (optional, `timing=True`, `measure_resources`): measured with `volsmpl.meter` in a fresh
+subprocess on validation body 0 (batch 1) and all its points, under torch.no_grad(): median wall time over
+`timing_repeats` after `timing_warmup` runs, with encoding (a fresh encoding: partition + PointNet + NBW
+weights, then the query) and without (the query on a given encoding); peak memory of the first
+encode+query: CUDA max_memory_allocated, or on the CPU the peak RSS increase (see `volsmpl.meter.Meter`).
+On a CPU shared with other busy processes time with `--threads 1`: OpenMP threads waiting for each other
+can slow a query many times.
 """
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import os
-import subprocess
-import sys
 import tempfile
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Dict, List, Optional
+from typing import Callable, Dict, Optional
 
 import numpy as np
 import torch
 
+from . import paper
 from .groundtruth import SIGN_MODES
+from .groundtruth_cache import default_cache_dir, ground_truth
+from .meter import Meter, peak_memory, run_isolated, timed_ms
+from .metrics import compute_metrics
+from .provenance import machine_info
+from .validation import VAL_SEED, digest, pose_bodies, query_points, validation_bodies, validation_labels
 
-#: seed of the validation set (PosePrior's 316 validation bodies in the paper). Training uses other seeds
-#: (and 'realistic' or 'mixed' poses); do not train on bodies from this seed.
-VAL_SEED = 316
+__all__ = ["PAPER_TABLE1", "EvalConfig", "EvalResult", "evaluate", "evaluate_volume", "evaluate_checkpoint",
+           "measure_resources", "resource_job", "format_table", "add_parser", "run"]
 
-#: shape groups of the validation set, cycled every 2 bodies: keyword arguments of `sample_betas`
-SHAPE_GROUPS = {
-    "tall": dict(height_range=(1.85, 3.0)),
-    "short": dict(height_range=(0.0, 1.55)),
-    "male": dict(gender_range=(0.0, 0.25)),
-    "female": dict(gender_range=(0.75, 1.0)),
-}
-
-#: the paper's Table 1 (fractions for IoU, m^2 for MSE, GPU memory in GiB, time in ms), for reference
-PAPER_TABLE1 = {
-    "VolumetricSMPL (paper)": dict(t_ms=15, mem="3.1 G GPU", iou_mean=0.9467, iou_surf=0.9425, iou_unif=0.9510,
-                                   mse_sdf=3.7e-5, mse_abs_sdf=3.5e-5),
-    "COAP (paper)": dict(t_ms=140, mem="18.7 G GPU", iou_mean=0.9431, iou_surf=0.9398, iou_unif=0.9463,
-                         mse_sdf=None, mse_abs_sdf=None),
-    "LEAP (paper)": dict(t_ms=79, mem="7.7 G GPU", iou_mean=0.7598, iou_surf=0.6998, iou_unif=0.8197,
-                         mse_sdf=None, mse_abs_sdf=None),
-}
-
-_GT_CACHE_VERSION = "gt-v1"
+def _paper_table1() -> dict:
+    """The paper's Table 1 (volsmpl.paper) as this module prints it: IoU as fractions, MSE in m^2, time in ms."""
+    names = {"volsmpl": "VolumetricSMPL (paper)", "coap": "COAP (paper)", "leap": "LEAP (paper)"}
+    out = {}
+    for key, row in paper.rows("1").items():
+        out[names[key]] = dict(t_ms=row["t_ms"], mem=f"{row['gpu_gb']} G GPU",
+                               **{k: round(row[k] / 100, 6) for k in ("iou_mean", "iou_surf", "iou_unif")},
+                               mse_sdf=row["mse_sdf"], mse_abs_sdf=row["mse_abs_sdf"])
+    return out
 
 
-def default_cache_dir() -> Path:
-    """$VOLSMPL_CACHE_DIR, else `data/cache/` of the source checkout (git-ignored), else ~/.cache/volsmpl."""
-    env = os.environ.get("VOLSMPL_CACHE_DIR")
-    if env:
-        return Path(env)
-    root = Path(__file__).resolve().parent.parent
-    if (root / "pyproject.toml").exists():
-        return root / "data" / "cache"
-    return Path.home() / ".cache" / "volsmpl"
+#: the paper's Table 1 (fractions for IoU, m^2 for MSE, GPU memory in GB, time in ms), for reference
+PAPER_TABLE1 = _paper_table1()
 
 
 @dataclass
@@ -177,204 +113,10 @@ class EvalConfig:
             raise ValueError(f"EvalConfig.device={self.device!r}: use 'cpu' or 'cuda'.")
 
 
-# ---------------------------------------------------------------------------------------------- validation set
-def _sub_seed(*words: int) -> int:
-    """A 32-bit seed derived from integers (independent streams per (seed, body, purpose))."""
-    return int(np.random.SeedSequence([int(w) for w in words]).generate_state(1)[0])
-
-
-def _body_spec(i: int, seed: int) -> dict:
-    from .body.poses import NAMED_POSES
-
-    names = list(NAMED_POSES)
-    group = list(SHAPE_GROUPS)[(i // 2) % len(SHAPE_GROUPS)]
-    pose = f"named:{names[i // 2]}" if i % 2 == 1 and i // 2 < len(names) else "extreme"
-    return {"pose": pose, "shape": group, "seed": _sub_seed(seed, i)}
-
-
-def validation_labels(n: int = 64, seed: int = VAL_SEED) -> List[str]:
-    """Human-readable composition of `validation_bodies(n, seed)`: 'pose/shape' per body, e.g. 'named:sitting/short'."""
-    return [f"{s['pose']}/{s['shape']}" for s in (_body_spec(i, seed) for i in range(n))]
-
-
-def validation_bodies(n: int = 64, seed: int = VAL_SEED, num_betas: int = 10) -> Dict[str, torch.Tensor]:
-    """The fixed validation set (see the module docstring for its composition).
-
-    Args:
-        n: number of bodies; seed: validation seed; num_betas: shape coefficients per body.
-    Returns:
-        dict of float32 CPU tensors: betas (n, num_betas), global_orient (n, 3), body_pose (n, 69),
-        transl (n, 3). Bit-identical for equal (n, seed, num_betas); body i does not depend on n.
-    """
-    from scipy.spatial.transform import Rotation
-
-    from .body.poses import named_pose, sample_poses
-    from .body.shapes import sample_betas
-
-    if not isinstance(n, int) or n < 1:
-        raise ValueError(f"validation_bodies needs n >= 1 bodies, got {n!r}.")
-    betas, orient, pose, transl = [], [], [], []
-    for i in range(n):
-        spec = _body_spec(i, seed)
-        s = spec["seed"]
-        if spec["pose"] == "extreme":
-            pose.append(sample_poses(1, seed=_sub_seed(s, 0), mode="extreme"))
-        else:
-            pose.append(named_pose(spec["pose"].split(":", 1)[1]))
-        betas.append(sample_betas(1, num_betas=num_betas, seed=_sub_seed(s, 1), **SHAPE_GROUPS[spec["shape"]]))
-        rng = np.random.default_rng(_sub_seed(s, 2))
-        orient.append(Rotation.random(1, random_state=rng).as_rotvec())
-        transl.append(rng.uniform(-0.5, 0.5, size=(1, 3)))
-    f32 = dict(dtype=torch.float32)
-    return {
-        "betas": torch.cat(betas).to(**f32),
-        "global_orient": torch.as_tensor(np.concatenate(orient), **f32),
-        "body_pose": torch.cat(pose).to(**f32),
-        "transl": torch.as_tensor(np.concatenate(transl), **f32),
-    }
-
-
-def digest(tensors) -> str:
-    """sha256 hex digest of a tensor / array or a dict of them (names, dtypes, shapes and raw bytes, keys sorted)."""
-    h = hashlib.sha256()
-    items = sorted(tensors.items()) if isinstance(tensors, dict) else [("", tensors)]
-    for name, t in items:
-        a = t.detach().cpu().contiguous().numpy() if torch.is_tensor(t) else np.ascontiguousarray(t)
-        h.update(f"{name}|{a.dtype.str}|{a.shape}|".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
-
-
-def pose_bodies(body, bodies: Dict[str, torch.Tensor], batch_size: int = 16) -> torch.Tensor:
-    """Posed vertices (B, V, 3) float32 CPU of the bodies (dict of betas/global_orient/body_pose/transl)."""
-    like = body.v_template
-    verts = []
-    B = len(bodies["betas"])
-    with torch.no_grad():
-        for s in range(0, B, batch_size):
-            chunk = {k: v[s:s + batch_size].to(like.device, like.dtype) for k, v in bodies.items()}
-            verts.append(body(**chunk).vertices.float().cpu())
-    return torch.cat(verts)
-
-
-# ---------------------------------------------------------------------------------------------- query points
-def _surface_samples(vertices: torch.Tensor, faces: torch.Tensor, n: int, g: torch.Generator) -> torch.Tensor:
-    """Area-weighted uniform samples on one mesh: vertices (V, 3) float64, faces (F, 3) long -> (n, 3)."""
-    tri = vertices[faces]  # (F, 3, 3)
-    area = 0.5 * torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=-1).norm(dim=-1)
-    fid = torch.multinomial(area, n, replacement=True, generator=g)
-    u = torch.rand(n, 2, generator=g, dtype=torch.float64)
-    r = u[:, :1].sqrt()  # uniform in the triangle: (1 - r, r (1 - u2), r u2)
-    bary = torch.cat([1 - r, r * (1 - u[:, 1:]), r * u[:, 1:]], dim=1)
-    return (bary[:, :, None] * tri[fid]).sum(dim=1)
-
-
-def query_points(vertices: torch.Tensor, faces, n_points: int = 60000, seed: int = VAL_SEED,
-                 surface_fraction: float = 0.5, bbox_padding: float = 0.05, surface_sigma: float = 0.01):
-    """Evaluation queries per body (module docstring): [uniform in the padded AABB | near-surface].
-
-    Args:
-        vertices (B, V, 3) posed bodies; faces (F, 3); n_points per body; seed: body i samples from a
-        generator seeded with SeedSequence([seed, 1, i]), so its points do not depend on B or on batching.
-    Returns:
-        points (B, n_points, 3) float32; is_surface (n_points,) bool, True for the near-surface block.
-    """
-    v = torch.as_tensor(vertices).detach().cpu().to(torch.float64)
-    if v.ndim != 3 or v.shape[-1] != 3:
-        raise ValueError(f"vertices must be (B, V, 3), got {tuple(v.shape)}.")
-    f = torch.as_tensor(np.asarray(faces), dtype=torch.long)
-    n_surf = int(round(n_points * surface_fraction))
-    n_unif = n_points - n_surf
-    out = torch.empty(v.shape[0], n_points, 3, dtype=torch.float64)
-    for i in range(v.shape[0]):
-        g = torch.Generator().manual_seed(_sub_seed(seed, 1, i))
-        lo, hi = v[i].amin(0) - bbox_padding, v[i].amax(0) + bbox_padding
-        out[i, :n_unif] = lo + torch.rand(n_unif, 3, generator=g, dtype=torch.float64) * (hi - lo)
-        if n_surf:
-            surf = _surface_samples(v[i], f, n_surf, g)
-            out[i, n_unif:] = surf + torch.randn(n_surf, 3, generator=g, dtype=torch.float64) * surface_sigma
-    is_surface = torch.zeros(n_points, dtype=torch.bool)
-    is_surface[n_unif:] = True
-    return out.float(), is_surface
-
-
-# ---------------------------------------------------------------------------------------------- ground truth
-def ground_truth(vertices: torch.Tensor, faces, points: torch.Tensor, sign: str = "ray_winding",
-                 nsamples: int = 3, cache_dir: str | Path | None = None, use_cache: bool = True) -> torch.Tensor:
-    """Exact SDF (B, N) float32 of points (B, N, 3) w.r.t. the meshes (vertices (B, V, 3), faces (F, 3)),
-    by `groundtruth.batch_mesh_sdf`, cached as `<cache_dir>/gt_<key>.npz` (key: module docstring)."""
-    from .groundtruth import batch_mesh_sdf
-
-    v = torch.as_tensor(vertices).detach().cpu().float()
-    p = torch.as_tensor(points).detach().cpu().float()
-    f = np.asarray(faces, dtype=np.int64)
-    key = digest({"vertices": v, "faces": f, "points": p, "mode": np.frombuffer(
-        f"{_GT_CACHE_VERSION}|{sign}|{nsamples}".encode(), dtype=np.uint8)})
-    path = Path(cache_dir if cache_dir is not None else default_cache_dir()) / f"gt_{key[:24]}.npz"
-    if use_cache and path.exists():
-        try:
-            with np.load(path) as d:
-                if str(d["key"]) == key and d["sdf"].shape == tuple(p.shape[:2]):
-                    return torch.from_numpy(d["sdf"].astype(np.float32))
-        except (OSError, ValueError, KeyError):
-            pass  # unreadable cache entry: recompute and overwrite
-    sdf = batch_mesh_sdf(v.numpy(), f, p.numpy(), sign=sign, nsamples=nsamples).astype(np.float32)
-    if use_cache:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz.tmp")
-        os.close(fd)
-        try:
-            with open(tmp, "wb") as fh:
-                np.savez_compressed(fh, sdf=sdf, key=np.array(key))
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-    return torch.from_numpy(sdf)
-
-
-# ---------------------------------------------------------------------------------------------- metrics
-def iou(pred_occ: torch.Tensor, gt_occ: torch.Tensor) -> torch.Tensor:
-    """Intersection over union of boolean occupancies (B, N) -> (B,) float64; 1.0 where both are empty."""
-    pred_occ, gt_occ = torch.as_tensor(pred_occ).bool(), torch.as_tensor(gt_occ).bool()
-    if pred_occ.shape != gt_occ.shape:
-        raise ValueError(f"occupancies must have equal shapes, got {tuple(pred_occ.shape)} and {tuple(gt_occ.shape)}.")
-    inter = (pred_occ & gt_occ).sum(-1).double()
-    union = (pred_occ | gt_occ).sum(-1).double()
-    return torch.where(union > 0, inter / union.clamp_min(1), torch.ones_like(union))
-
-
-def compute_metrics(pred: torch.Tensor, gt: torch.Tensor, is_surface: torch.Tensor) -> Dict[str, torch.Tensor]:
-    """Per-body metrics (module docstring). pred, gt (B, N) SDF, negative inside; is_surface (N,) bool.
-
-    Returns: dict name -> (B,) float64: iou_mean, iou_surf, iou_unif, mse_sdf, mse_abs_sdf and the
-    `_surf` / `_unif` variants of the two MSEs.
-    """
-    pred, gt = torch.as_tensor(pred).double(), torch.as_tensor(gt).double()
-    if pred.shape != gt.shape or pred.ndim != 2:
-        raise ValueError(f"pred and gt must both be (B, N), got {tuple(pred.shape)} and {tuple(gt.shape)}.")
-    if not torch.isfinite(pred).all():
-        bad = int((~torch.isfinite(pred)).sum())
-        raise ValueError(f"the predictor returned {bad} non-finite SDF values; fix the model (NaN weights?) before evaluating.")
-    surf = torch.as_tensor(is_surface).bool()
-    sets = {"": slice(None), "_surf": surf, "_unif": ~surf}
-    m = {}
-    for tag in ("_surf", "_unif"):
-        m["iou" + tag] = iou(pred[:, sets[tag]] < 0, gt[:, sets[tag]] < 0)
-    m["iou_mean"] = 0.5 * (m["iou_surf"] + m["iou_unif"])
-    for tag, sel in sets.items():
-        p, g = pred[:, sel], gt[:, sel]
-        empty = p.shape[1] == 0
-        m["mse_sdf" + tag] = torch.full((len(p),), math.nan, dtype=torch.float64) if empty else ((p - g) ** 2).mean(1)
-        m["mse_abs_sdf" + tag] = torch.full((len(p),), math.nan, dtype=torch.float64) if empty else \
-            ((p.abs() - g.abs()) ** 2).mean(1)
-    return m
-
-
-# ---------------------------------------------------------------------------------------------- evaluation
 @dataclass
 class EvalResult:
-    """Outcome of `evaluate`: metrics (means over bodies), per-body values, timings and provenance."""
+    """Outcome of `evaluate`: metrics (means over bodies), per-body values, timings, resources and provenance
+    (meta: `volsmpl.provenance.machine_info`)."""
 
     name: str
     metrics: Dict[str, float]
@@ -385,6 +127,7 @@ class EvalResult:
     seconds: Dict[str, float]
     resources: Optional[dict] = None
     extra: dict = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         d = dataclasses.asdict(self)
@@ -392,6 +135,7 @@ class EvalResult:
         return d
 
 
+# ---------------------------------------------------------------------------------------------- evaluation
 def evaluate(predict_fn: Callable, bodies: Optional[Dict[str, torch.Tensor]] = None, body=None,
              config: Optional[EvalConfig] = None, name: str = "model", **overrides) -> EvalResult:
     """Evaluate an SDF predictor on the validation set.
@@ -404,7 +148,8 @@ def evaluate(predict_fn: Callable, bodies: Optional[Dict[str, torch.Tensor]] = N
         body: the body model (default volsmpl.create_body()); moved to config.device.
         config: EvalConfig; overrides: EvalConfig fields (e.g. n_bodies=2, n_points=4000).
     Returns:
-        EvalResult (timings of ground truth and predictor in `seconds`; resources None: see evaluate_volume).
+        EvalResult (timings of points, ground truth and predictor in `seconds`; resources None: see
+        evaluate_volume).
     """
     cfg = dataclasses.replace(config or EvalConfig(), **overrides)
     if body is None:
@@ -419,21 +164,17 @@ def evaluate(predict_fn: Callable, bodies: Optional[Dict[str, torch.Tensor]] = N
     if device.type == "cuda" and not torch.cuda.is_available():
         raise RuntimeError("device='cuda' but torch sees no CUDA GPU; use --device cpu.")
     body = body.to(device)
-    seconds = {}
-    t0 = time.perf_counter()
-    verts = pose_bodies(body, bodies, cfg.batch_size)
-    points, is_surface = query_points(verts, body.faces, cfg.n_points, cfg.seed, cfg.surface_fraction,
-                                      cfg.bbox_padding, cfg.surface_sigma)
-    seconds["points"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    gt = ground_truth(verts, body.faces, points, cfg.gt_sign, cfg.gt_nsamples, cfg.cache_dir, cfg.use_cache)
-    seconds["ground_truth"] = time.perf_counter() - t0
+    with Meter("cpu", memory=False) as m_points:
+        verts = pose_bodies(body, bodies, cfg.batch_size)
+        points, is_surface = query_points(verts, body.faces, cfg.n_points, cfg.seed, cfg.surface_fraction,
+                                          cfg.bbox_padding, cfg.surface_sigma)
+    with Meter("cpu", memory=False) as m_gt:
+        gt = ground_truth(verts, body.faces, points, cfg.gt_sign, cfg.gt_nsamples, cfg.cache_dir, cfg.use_cache)
 
     preds = []
-    t0 = time.perf_counter()
     B = len(verts)
     like = body.v_template
-    with torch.no_grad():
+    with torch.no_grad(), Meter(device, memory=False) as m_pred:
         for s in range(0, B, cfg.batch_size):
             chunk = {k: v[s:s + cfg.batch_size].to(device, like.dtype) for k, v in bodies.items()}
             out = body(**chunk)
@@ -444,15 +185,14 @@ def evaluate(predict_fn: Callable, bodies: Optional[Dict[str, torch.Tensor]] = N
                 raise ValueError(f"predict_fn returned shape {tuple(pred.shape)} for points {tuple(p.shape)}; "
                                  f"it must return one SDF value per point, (B, N).")
             preds.append(pred.double())
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-    seconds["predict"] = time.perf_counter() - t0
+    seconds = {"points": m_points.seconds, "ground_truth": m_gt.seconds, "predict": m_pred.seconds}
     per = compute_metrics(torch.cat(preds), gt, is_surface)
     metrics = {k: float(v.mean()) for k, v in per.items()}
     per_body = {"label": validation_labels(B, cfg.seed) if _is_validation_set(bodies, cfg) else [f"body{i}" for i in range(B)]}
     per_body.update({k: v.tolist() for k, v in per.items()})
     return EvalResult(name=name, metrics=metrics, per_body=per_body, config=dataclasses.asdict(cfg),
-                      validation_digest=digest(bodies), points_digest=digest(points), seconds=seconds)
+                      validation_digest=digest(bodies), points_digest=digest(points), seconds=seconds,
+                      meta=machine_info(cfg.device, torch.get_num_threads()))
 
 
 def _is_validation_set(bodies, cfg: EvalConfig) -> bool:
@@ -493,7 +233,7 @@ def evaluate_checkpoint(path: str | os.PathLike | None, config: Optional[EvalCon
     from .body.model import create_body
     from .checkpoint import checkpoint_model
     from .nn.config import VolumeConfig
-    from .volume import attach_volume
+    from .attach import attach_volume
 
     body = body if body is not None else create_body()
     if random_init is not None:
@@ -515,18 +255,17 @@ def evaluate_checkpoint(path: str | os.PathLike | None, config: Optional[EvalCon
 # ---------------------------------------------------------------------------------------------- resources
 def measure_resources(spec: dict, config: Optional[EvalConfig] = None, **overrides) -> dict:
     """Time and memory of one query (batch 1, body 0 of the validation set, all its points), in a fresh
-    Python subprocess so that memory peaks are not hidden by earlier allocations of this process.
+    Python subprocess (`meter.run_isolated` of `resource_job`) so that memory peaks are not hidden by
+    earlier allocations of this process.
 
     Args:
-        spec: {'checkpoint': PATH or None (shipped)} or {'config': VolumeConfig dict, 'init_seed': int};
-            optional 'body_model': SMPL-format file (default body if None).
-        config: EvalConfig (n_points, seed, device, timing_repeats, timing_warmup, ...).
+        spec: {'checkpoint': PATH or None (shipped), 'model': 'volsmpl' | 'coap'} or {'config': VolumeConfig
+            dict, 'init_seed': int}; optional 'body_model': SMPL-format file (default body if None).
+        config: EvalConfig (n_points, seed, device, timing_repeats, timing_warmup, timing_threads, ...).
     Returns:
         dict: t_ms (median, encoding included), t_query_ms (median, encoding excluded), t_ms_all /
-        t_query_ms_all (every timed run), mem_bytes, mem_kind ('cuda max_memory_allocated' or
-        'cpu peak RSS increase'), mem_method (CPU: 'ru_maxrss' when the query raised the process's
-        high-water mark, else the peak of the RSS polled every 0.2 ms during the query: model
-        construction can peak higher than a query), device, threads.
+        t_query_ms_all (every timed run), mem_bytes, mem_total_bytes, mem_kind ('cuda max_memory_allocated'
+        or 'cpu peak RSS increase'), mem_method (see `volsmpl.meter.Meter`), device, threads, points.
     """
     cfg = dataclasses.replace(config or EvalConfig(), **overrides)
     from .body.model import create_body
@@ -537,74 +276,23 @@ def measure_resources(spec: dict, config: Optional[EvalConfig] = None, **overrid
     points, _ = query_points(verts, body.faces, cfg.n_points, cfg.seed, cfg.surface_fraction, cfg.bbox_padding,
                              cfg.surface_sigma)
     with tempfile.TemporaryDirectory() as tmp:
-        torch.save({"bodies": bodies, "points": points}, os.path.join(tmp, "inputs.pt"))
-        job = {"spec": spec, "inputs": os.path.join(tmp, "inputs.pt"), "device": cfg.device,
-               "repeats": cfg.timing_repeats, "warmup": cfg.timing_warmup, "threads": cfg.timing_threads or torch.get_num_threads()}
-        proc = subprocess.run([sys.executable, "-c", "import sys; from volsmpl.evaluate import _resource_worker; "
-                               "_resource_worker(sys.argv[1])", json.dumps(job)],
-                              capture_output=True, text=True, timeout=1800)
-    if proc.returncode != 0:
-        raise RuntimeError(f"the timing subprocess failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+        inputs = os.path.join(tmp, "inputs.pt")
+        torch.save({"bodies": bodies, "points": points}, inputs)
+        job = {"spec": spec, "inputs": inputs, "device": cfg.device, "repeats": cfg.timing_repeats,
+               "warmup": cfg.timing_warmup, "threads": cfg.timing_threads or torch.get_num_threads()}
+        return run_isolated("volsmpl.evaluate:resource_job", job, timeout_s=1800)
 
 
-def _rss_bytes() -> int:
-    try:
-        with open("/proc/self/statm") as fh:
-            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
-    except (OSError, ValueError):
-        return -1
-
-
-def _maxrss_bytes() -> int:
-    import resource
-    r = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    return int(r) if sys.platform == "darwin" else int(r) * 1024  # Linux reports KiB
-
-
-def _malloc_trim() -> None:
-    try:
-        import ctypes
-        ctypes.CDLL("libc.so.6").malloc_trim(0)
-    except (OSError, AttributeError):  # not glibc: RSS may then include reusable freed memory
-        pass
-
-
-class _RssSampler:
-    """Context manager polling this process's RSS in a thread (torch ops release the GIL); .peak in bytes."""
-
-    def __init__(self, interval: float = 2e-4):
-        self.interval, self.peak = interval, _rss_bytes()
-
-    def __enter__(self):
-        import threading
-        self._stop = threading.Event()
-
-        def poll():
-            while not self._stop.is_set():
-                self.peak = max(self.peak, _rss_bytes())
-                self._stop.wait(self.interval)
-        self._thread = threading.Thread(target=poll, daemon=True)
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join()
-        self.peak = max(self.peak, _rss_bytes())
-        return False
-
-
-def _resource_worker(job_json: str) -> None:
-    """Body of the timing subprocess (see measure_resources); prints one JSON line."""
+def resource_job(job: dict) -> dict:
+    """The measurement of `measure_resources`, run in the isolated process: job {'spec', 'inputs' (a file of
+    {'bodies', 'points'}), 'device', 'threads', 'warmup', 'repeats'}; returns its result dict."""
     import gc
 
-    job = json.loads(job_json)
-    torch.set_num_threads(int(job["threads"]))
     from .body.model import create_body
     from .nn.config import VolumeConfig
-    from .volume import attach_volume
+    from .attach import attach_volume
 
+    torch.set_num_threads(int(job["threads"]))
     device = torch.device(job["device"])
     spec = job["spec"]
     body = create_body(spec.get("body_model"))
@@ -618,60 +306,25 @@ def _resource_worker(job_json: str) -> None:
     with torch.no_grad():
         out = body(**{k: v.to(device) for k, v in data["bodies"].items()})
     pts = data["points"].to(device)
-
-    def sync():
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
+    warmup, repeats = int(job["warmup"]), int(job["repeats"])
 
     def full():  # encoding included: a fresh encoding (bypasses the per-output cache), then the query
-        return vol.query_encoded(vol._encode(out, None), pts)
+        return vol.query_encoded(vol.encode(out, fresh=True), pts)
 
     gc.collect()
     res = {"device": str(device), "threads": torch.get_num_threads(), "points": int(pts.shape[1])}
     with torch.no_grad():
-        if device.type == "cuda":
-            sync()
-            torch.cuda.reset_peak_memory_stats(device)
-            base = torch.cuda.memory_allocated(device)
+        res.update(peak_memory(full, device))  # the first call: one-time allocations included
+        for _ in range(warmup):
             full()
-            sync()
-            res.update(mem_bytes=int(torch.cuda.max_memory_allocated(device) - base),
-                       mem_total_bytes=int(torch.cuda.max_memory_allocated(device)),
-                       mem_kind="cuda max_memory_allocated", mem_method="torch.cuda.max_memory_allocated")
-        else:
-            _malloc_trim()  # return freed set-up memory to the OS, so the query's pages count in the RSS
-            base, peak0 = _rss_bytes(), _maxrss_bytes()
-            with _RssSampler() as sampler:
-                full()
-            peak1 = _maxrss_bytes()
-            # ru_maxrss is a high-water mark that Linux carries over fork+exec from the parent, so a parent with a
-            # large RSS hides the query's peak: then fall back to the polled RSS.
-            if peak1 > peak0:  # the query set a new high-water mark: exact
-                res.update(mem_bytes=int(peak1 - base), mem_total_bytes=int(peak1), mem_method="ru_maxrss")
-            else:  # the set-up's peak was higher: use the sampled RSS (may miss sub-millisecond spikes)
-                res.update(mem_bytes=int(sampler.peak - base), mem_total_bytes=int(sampler.peak),
-                           mem_method=f"RSS sampled every {sampler.interval * 1e3:g} ms")
-            res.update(mem_kind="cpu peak RSS increase")
-        for _ in range(int(job["warmup"])):
-            full()
-        sync()
-        t_full, t_query = [], []
-        for _ in range(int(job["repeats"])):
-            t0 = time.perf_counter()
-            full()
-            sync()
-            t_full.append((time.perf_counter() - t0) * 1e3)
-        enc = vol._encode(out, None)
-        for _ in range(int(job["warmup"])):
-            vol.query_encoded(enc, pts)
-        sync()
-        for _ in range(int(job["repeats"])):
-            t0 = time.perf_counter()
-            vol.query_encoded(enc, pts)
-            sync()
-            t_query.append((time.perf_counter() - t0) * 1e3)
+        t_full = timed_ms([full] * repeats, device)
+        enc = vol.encode(out, fresh=True)
+        query = lambda: vol.query_encoded(enc, pts)
+        for _ in range(warmup):
+            query()
+        t_query = timed_ms([query] * repeats, device)
     res.update(t_ms=float(np.median(t_full)), t_query_ms=float(np.median(t_query)), t_ms_all=t_full, t_query_ms_all=t_query)
-    print(json.dumps(res))
+    return res
 
 
 # ---------------------------------------------------------------------------------------------- report
@@ -680,8 +333,7 @@ def _fmt_mem(r: dict) -> str:
         return "-"
     mib = r["mem_bytes"] / 2 ** 20
     where = "GPU" if r["mem_kind"].startswith("cuda") else "CPU"
-    s = f"{mib / 1024:.2f} G {where}" if mib >= 1024 else f"{mib:.0f} M {where}"
-    return s
+    return f"{mib / 1024:.2f} G {where}" if mib >= 1024 else f"{mib:.0f} M {where}"
 
 
 def format_table(results) -> str:

@@ -66,8 +66,9 @@ from .body.poses import check_pose_mode, sample_poses
 from .body.shapes import sample_betas
 from .checkpoint import load_checkpoint, save_checkpoint
 from .groundtruth import SIGN_MODES, batch_mesh_sdf, sample_training_queries
+from .models import learned_models, model_kind
 from .nn.config import VolumeConfig
-from .volume import attach_volume
+from .attach import attach_volume
 
 
 @dataclass
@@ -123,11 +124,13 @@ class TrainConfig:
         check_pose_mode(self.pose_mode, self.extreme_fraction)
         if self.residual not in ("signed", "abs"):
             raise ValueError(f"residual must be 'signed' or 'abs', got {self.residual!r}")
-        if self.model_kind == "coap" and isinstance(self.model, VolumeConfig):
+        if self.model_kind not in learned_models():
+            raise ValueError(f"model_kind must be one of {', '.join(learned_models())} (a network), got {self.model_kind!r}")
+        cls = model_kind(self.model_kind).config_class()
+        if not isinstance(self.model, cls):
             if self.model != VolumeConfig():
-                raise ValueError("model_kind='coap' needs a CoapConfig as model, got a VolumeConfig.")
-            from .nn.coap_net import CoapConfig
-            self.model = CoapConfig()
+                raise ValueError(f"model_kind={self.model_kind!r} needs a {cls.__name__} as model, got a {type(self.model).__name__}.")
+            self.model = cls()
 
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
@@ -144,13 +147,10 @@ class TrainConfig:
         if unknown:
             raise ValueError(f"unknown training config key(s) {unknown}; valid keys: {sorted(known)}")
         kind = d.get("model_kind", "volsmpl")
-        if kind not in ("volsmpl", "coap"):
-            raise ValueError(f"model_kind must be 'volsmpl' or 'coap', got {kind!r}")
-        if kind == "coap":
-            from .nn.coap_net import CoapConfig
-            d["model"] = CoapConfig.from_dict(d.get("model", {}))
-        elif "model" in d:
-            d["model"] = VolumeConfig.from_dict(d["model"])
+        if kind not in learned_models():
+            raise ValueError(f"model_kind must be one of {', '.join(learned_models())} (a network), got {kind!r}")
+        if kind != "volsmpl" or "model" in d:
+            d["model"] = model_kind(kind).config_from_dict(d.get("model", {}))
         for key in ("surface_sigma", "body_surface_sigma"):
             if key in d:
                 d[key] = tuple(d[key])
@@ -286,7 +286,7 @@ class TrainStep(torch.nn.Module):
         g = torch.Generator().manual_seed(batch["seed"])
         enc = self._volume.encode(out, generator=g)  # fresh surface samples: augmentation
         pred = self._volume.query_encoded(enc, batch["points"])
-        if self._volume.is_sdf:
+        if model_kind(self._volume.kind).train_loss == "sdf":
             return sdf_loss(pred, batch["sdf"], self.cfg)
         return occupancy_loss(pred, batch["sdf"])
 
@@ -408,7 +408,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     models at equal compute.
 
     resume continues the run in out_dir exactly (weights, Adam state, step). init starts a new run from
-    a model checkpoint (e.g. one committed by an earlier session): its weights and its training step,
+    a model checkpoint (e.g. a shipped one): its weights and its training step,
     so the learning-rate schedule and the data stream continue; Adam's moments start afresh.
 
     Returns a summary dict: last step, last loss, steps/s.

@@ -18,22 +18,19 @@ min over parts; points in no box get the analytic box SDF (paper eq. 4).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import torch
 
-from .body.fingerprint import fingerprint_of_model
-from .boxes import boxes_overlap, inside_boxes, sample_overlaps
-from .checkpoint import load_checkpoint
+from .boxes import inside_boxes
+from .models import kind_of_network
 from .nn.analytic import box_sdf
-from .nn.config import VolumeConfig
-from .nn.volsmpl_net import PartCode, VolumetricSMPLNet
+from .nn.volsmpl_net import PartCode
 from .partition import Partition
+from .self_penetration import overlap_samples, reduce_selfpen
 from .validate import check_points
+from .volume_api import BodyVolume, check_output
 
-ASSETS = Path(__file__).resolve().parent / "assets"
 SELFPEN_TAU = 0.01  # metres: SDF scale of the self-penetration loss's soft occupancy (Volume.selfpen_loss)
-DEFAULT_CHECKPOINTS = {"volsmpl": ASSETS / "volsmpl_anny", "coap": ASSETS / "coap_anny"}
 
 
 @dataclass
@@ -65,12 +62,6 @@ class Encoding:
         return self.slot >= 0
 
 
-def _check_output(out) -> None:
-    for name in ("vertices", "joints", "full_pose"):
-        if not torch.is_tensor(getattr(out, name, None)):
-            raise TypeError(f"expected a body forward output with tensor '{name}' (call body(...) first), got {type(out).__name__}")
-
-
 def _stamp(out) -> tuple:
     return tuple((t.data_ptr(), t._version, tuple(t.shape), t.dtype, t.device) for t in (out.vertices, out.joints, out.full_pose))
 
@@ -88,7 +79,7 @@ def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[to
     return 0.5 * (box_min + box_max), 0.5 * (box_max - box_min).amax(dim=-1, keepdim=True)
 
 
-class Volume(torch.nn.Module):
+class Volume(BodyVolume):
     """Volumetric (SDF) extension of one body model; see the module docstring.
 
     Args:
@@ -108,22 +99,21 @@ class Volume(torch.nn.Module):
         self.chunk_elems = int(chunk_elems)
         self._last: Encoding | None = None
         self.decoder_evaluations = 0  # (point, part) decoder evaluations so far, for tests and benchmarks
-
-    @property
-    def num_parts(self) -> int:
-        return self.partition.num_parts
+        self.kind = kind_of_network(net)  # the registry's name of this model ('volsmpl', 'coap')
 
     # ------------------------------------------------------------------ encoding
-    def encode(self, out, generator: torch.Generator | None = None) -> Encoding:
+    def encode(self, out, generator: torch.Generator | None = None, fresh: bool = False) -> Encoding:
         """Encode a body output (B bodies); cached on the output and reused while its tensors and the
         network's weights are unchanged (an optimiser step or load_state_dict between queries re-encodes).
 
         Args:
             out: body forward output with vertices (B, V, 3), joints (B, >=J, 3), full_pose (B, J*3).
             generator: draw fresh surface samples (training augmentation) instead of the fixed set; not cached.
+            fresh: encode anew, neither reading nor writing the cache (benchmarks time the encoder this way).
+        Use with `query_encoded(enc, points)`.
         """
-        _check_output(out)
-        use_cache = generator is None and not self.training
+        check_output(out)
+        use_cache = generator is None and not self.training and not fresh
         cached = self._cached(out) if use_cache else None
         if cached is not None and cached.parts is None:
             return cached
@@ -149,7 +139,7 @@ class Volume(torch.nn.Module):
         ones), cached in turn. A part whose box holds no point only contributes its analytic box
         distance, so encoding it would change nothing: queries near a few parts (a hand and an object)
         run the encoder on those parts only."""
-        _check_output(out)
+        check_output(out)
         enc = None if self.training else self._cached(out)
         if enc is not None and enc.parts is None:
             return enc
@@ -244,6 +234,11 @@ class Volume(torch.nn.Module):
         """Inside test of query/query_parts values: sdf < 0, or occupancy > level."""
         return values < 0 if self.is_sdf else values > self.level
 
+    def to_signed(self, values: torch.Tensor) -> torch.Tensor:
+        """query values -> the common sign convention, negative inside and positive outside: the signed distance
+        itself (SDF models), level - occupancy for occupancy models (monotone, 0 on the surface, not metres)."""
+        return values if self.is_sdf else self.level - values
+
     def _part_values(self, enc: Encoding, points: torch.Tensor, dense: bool):
         """points (B, N, 3) -> part (B, K, N), inside (B, K, N) bool (point in part k's padded box).
 
@@ -299,7 +294,7 @@ class Volume(torch.nn.Module):
         Args: out: body output (B bodies); points: (B, N, 3) or (N, 3) shared by all bodies.
         Returns: (B, K, N).
         """
-        _check_output(out)
+        check_output(out)
         points = check_points(points, out.vertices)
         enc = self._encoding_for(out, points)
         dense = self.dense if dense is None else dense
@@ -315,7 +310,7 @@ class Volume(torch.nn.Module):
         Args: out: body output (B bodies); points: (B, N, 3) or (N, 3) shared by all bodies.
         Returns: (B, N); an empty (B, 0) for N = 0.
         """
-        _check_output(out)
+        check_output(out)
         points = check_points(points, out.vertices)
         return self.query_encoded(self._encoding_for(out, points), points, dense)
 
@@ -335,43 +330,30 @@ class Volume(torch.nn.Module):
                 res.append(part.amax(dim=1))
         return torch.cat(res, dim=1) if res else points.new_zeros(B, 0)
 
-    def collision_loss(self, out, points: torch.Tensor, reduction: str = "mean") -> torch.Tensor:
-        """Penetration of points into the bodies: ReLU(-sdf); for occupancy models COAP's ReLU(occ - 0.5).
-
-        reduction: 'mean' (scalar over all bodies and points), 'sum' (per body, (B,)) or 'none' ((B, N)).
-        """
-        if reduction not in ("mean", "sum", "none"):
-            raise ValueError(f"reduction must be 'mean', 'sum' or 'none', got {reduction!r}")
-        q = self.query(out, points)
-        pen = torch.relu(-q) if self.is_sdf else torch.relu(q - self.level)
-        if reduction == "none":
-            return pen
-        if reduction == "sum":
-            return pen.sum(dim=1)
-        return pen.mean() if pen.numel() else pen.sum()
+    def penetration(self, values: torch.Tensor) -> torch.Tensor:
+        """Per-point penetration of query values (collision_loss before the reduction): VolumetricSMPL
+        ReLU(-sdf) (metres); COAP sigmoid(f) 1[f > 0] with f its logit, positive inside, i.e. the occupancy of
+        the points that are inside (above the 0.5 level) and 0 elsewhere (the paper's term, supp. D.2)."""
+        if self.is_sdf:
+            return torch.relu(-values)
+        return values * (values > self.level).to(values.dtype)
 
     def selfpen_loss(self, out, n_points: int = 300, generator: torch.Generator | None = None,
                      return_points: bool = False, tau: float = SELFPEN_TAU, code_grad: bool = True):
-        """Self-penetration loss (paper eq. 5, supplementary C.4), per body.
+        """Self-penetration loss (paper eq. 5, supplementary D.4), per body (steps in volsmpl.self_penetration).
 
-        1. Find intersecting padded part boxes (exact oriented-box test), skipping kinematically
-           adjacent parts and COAP's ignored pairs (partition.collision_mask).
-        2. Sample n_points uniformly in each box of an intersecting pair, keep those inside the other box.
-        3. Keep samples inside at least two parts that may collide, by the part-wise SDF (< 0).
-        4. loss = sum over kept samples and over the colliding parts containing them of sigmoid(-d_k(x) / tau):
-           the paper's sigma(f(x)) with f read as positive inside (our SDF is negative inside), so that
-           minimising it pushes the parts apart. f in metres (tau = 1 m, eq. 5 to the letter) makes the
-           sigmoid nearly flat (slope 0.25 per metre), so the loss reads the SDF in units of tau; the
-           default 1 cm gives the soft occupancy the sharpness of an occupancy network's surface (the
-           shipped COAP's logit changes by 100 per metre across the surface), and one set of optimiser
-           settings then suits both models. Occupancy models (COAP): sum over kept samples of
-           (sum of the colliding parts' occupancies - 0.5), as COAP; tau is not used.
+        Samples in overlapping boxes of parts that may collide are kept when inside two such parts (part value
+        < 0 for SDF models, > level for occupancy models). SDF models: loss = sum over kept samples and over the
+        colliding parts containing them of sigmoid(-d_k(x) / tau): the paper's sigma(f(x)) with f read as
+        positive inside (our SDF is negative inside), so that minimising it pushes the parts apart. f in metres
+        (tau = 1 m, eq. 5 to the letter) makes the sigmoid nearly flat (slope 0.25 per metre), so the loss reads
+        the SDF in units of tau; the default 1 cm gives the soft occupancy the sharpness of an occupancy
+        network's surface, and one set of optimiser settings then suits both models. Occupancy models (COAP):
+        sum over kept samples of (sum of the colliding parts' occupancies - 0.5), as COAP; tau is not used.
         code_grad=False treats the part codes as constants: the pose gradient then flows through the part
         frames only (rigid part motion), not through the change of each part's shape code, and the backward
-        pass skips the encoder (about half of a step's time). On the 17 shipped self-intersection cases its
-        pose gradient has cosine >= 0.97 (median >= 0.997) with the full one for the session-3 checkpoints of both
-        models and >= 0.879 (median 0.997; sitting_on_heels 0.879, hand_behind_into_buttock 0.963) for the
-        VolumetricSMPL checkpoint shipped in session 12 (the checkpoints in between: README, selfpen section).
+        pass skips the encoder (about half of a step's time; its cosine with the full gradient on the
+        self-intersection cases is measured in docs/ and the README).
         Only the parts of overlapping box pairs are encoded (unless the output is encoded already): a
         sample lies in two parts' boxes, and a part that forms no overlapping pair with the sample's
         other parts can neither be involved nor be a partner, so the loss and its gradients are those
@@ -380,47 +362,32 @@ class Volume(torch.nn.Module):
         """
         if not tau > 0:
             raise ValueError(f"tau must be > 0 (metres: the SDF scale of the soft occupancy), got {tau}")
-        _check_output(out)
+        check_output(out)
         enc = None if self.training else self._cached(out)
         G, box_min, box_max = self._frames(out) if enc is None else (enc.G, enc.box_min, enc.box_max)
-        B = G.shape[0]
         mask = self.partition.collision_mask
-        with torch.no_grad():
-            overl = boxes_overlap(G, box_min, box_max) & mask
-        cands = []
-        for b in range(B):
-            pairs = torch.triu(overl[b]).nonzero()
-            pts, _ = sample_overlaps(G[b].detach(), box_min[b].detach(), box_max[b].detach(), pairs, n_points, generator)
-            cands.append(pts)
-        M = max([c.shape[0] for c in cands] + [0])
-        losses, kept = [], []
-        if M == 0:
+        overl, samples, padded = overlap_samples(G, box_min, box_max, mask, n_points, generator)
+        if padded is None:
             zero = out.vertices.sum() * 0  # keeps the graph (and device/dtype)
-            return (zero.expand(B).clone(), [c for c in cands]) if return_points else zero.expand(B).clone()
+            loss = zero.expand(G.shape[0]).clone()
+            return (loss, samples) if return_points else loss
         need = overl.any(dim=0).any(dim=0)
         if enc is None or (need & ~enc.encoded(self.num_parts)).any():
             # encode only the parts of overlapping pairs: no other part can be involved (docstring)
             parts = None if need.all() else need.nonzero()[:, 0]
             enc = self._encode(out, None, parts=parts, frames=(G, box_min, box_max), code_grad=code_grad)
-        far = out.vertices.detach().amax(dim=(0, 1)) + 10.0  # padding point outside every box: no network cost
-        padded = far.expand(B, M, 3).clone()
-        for b, c in enumerate(cands):
-            padded[b, : c.shape[0]] = c
         part, _ = self._part_values(enc, padded, self.dense)  # (B, K, M)
-        occ = self.occupied(part).to(part.dtype)
-        partner = torch.einsum("kl,blm->bkm", mask.to(part.dtype), occ) > 0  # part k has a colliding partner occupied
-        involved = (occ > 0) & partner
-        for b in range(B):
-            n = cands[b].shape[0]
-            inv = involved[b, :, :n]
-            if self.is_sdf:
-                losses.append((torch.sigmoid(-part[b, :, :n] / tau) * inv).sum())
-            else:
-                keep = inv.any(dim=0)
-                losses.append(((part[b, :, :n] * inv).sum(dim=0) - self.level)[keep].sum())
-            kept.append(cands[b][inv.any(dim=0)])
-        loss = torch.stack(losses)
-        return (loss, kept) if return_points else loss
+        return reduce_selfpen(part, self.occupied(part), mask, samples, self.selfpen_penalty(tau), return_points)
+
+    def selfpen_penalty(self, tau: float = SELFPEN_TAU):
+        """penalty(part (K, n), involved (K, n)) -> scalar of one body's kept samples (selfpen_loss)."""
+        if self.is_sdf:
+            return lambda part, inv: (torch.sigmoid(-part / tau) * inv).sum()
+
+        def occupancy_penalty(part, inv):
+            keep = inv.any(dim=0)
+            return ((part * inv).sum(dim=0) - self.level)[keep].sum()
+        return occupancy_penalty
 
     @torch.no_grad()
     def extract_mesh(self, out, resolution: int = 128, body_index: int = 0, padding: float = 0.05):
@@ -458,69 +425,3 @@ class _OneBody:
 def select_body(out, b: int):
     """A one-body view (batch of 1) of body b of a batched body output, for any volume query."""
     return _OneBody(out, b)
-
-
-MODELS = ("volsmpl", "coap")
-
-
-def build_network(model: str, num_parts: int, config=None):
-    """The network of a model name with its config (paper defaults when config is None)."""
-    if model == "volsmpl":
-        return VolumetricSMPLNet(num_parts, config or VolumeConfig())
-    if model == "coap":
-        from .nn.coap_net import CoapConfig, CoapNet
-        return CoapNet(num_parts, config or CoapConfig())
-    raise ValueError(f"unknown model {model!r}; available: {', '.join(MODELS)}.")
-
-
-def config_from_dict(d: dict):
-    """Rebuild a model config saved in a checkpoint; returns (model name, config)."""
-    if d.get("model") == "coap":
-        from .nn.coap_net import CoapConfig
-        return "coap", CoapConfig.from_dict(d)
-    return "volsmpl", VolumeConfig.from_dict({k: v for k, v in d.items() if k != "model"})
-
-
-def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool = True, model: str = "volsmpl",
-                  config=None, dense: bool = False):
-    """Attach a volumetric model as `body.volume` (and return it).
-
-    Args:
-        body: volsmpl.Body or smplx SMPL / SMPL-H / SMPL-X model.
-        checkpoint: trained weights (path with or without .safetensors); default: the shipped checkpoint
-            of `model` for the default body.
-        pretrained: False gives randomly initialised weights (tests, or the start of training).
-        model: 'volsmpl' (signed distance, this paper) or 'coap' (occupancy baseline, COAP).
-        config: architecture for pretrained=False (VolumeConfig / CoapConfig; checkpoints carry their own).
-        dense: use the dense reference query path (every part decoder on every point).
-    """
-    if model not in MODELS:
-        raise ValueError(f"unknown model {model!r}; available: {', '.join(MODELS)}.")
-    fp = fingerprint_of_model(body)
-    meta, state = {}, None
-    if pretrained:
-        path = Path(checkpoint) if checkpoint is not None else DEFAULT_CHECKPOINTS[model]
-        if checkpoint is None and not Path(str(path) + ".safetensors").exists():
-            raise FileNotFoundError(
-                f"no trained {model} checkpoint ships for this body (fingerprint {fp}). Train one with "
-                f"`volsmpl train` and pass checkpoint=PATH, or use attach_volume(body, pretrained=False) for random weights.")
-        state, cfg_dict, meta = load_checkpoint(path, expected_fingerprint=fp)
-        kind, config = config_from_dict(cfg_dict)
-        if kind != model:
-            raise ValueError(f"{path} holds a {kind} model; call attach_volume(body, checkpoint=..., model='{kind}').")
-    partition = Partition(body, n_samples=(config.n_surface_samples if config else 1000),
-                          box_padding=(config.box_padding if config else 0.125))
-    net = build_network(model, partition.num_parts, config)
-    if state is not None:
-        try:
-            net.load_state_dict(state)
-        except RuntimeError as e:
-            raise ValueError(f"checkpoint {checkpoint} does not fit the {model} network for this body "
-                             f"({partition.num_parts} parts): {str(e)[:300]}") from e
-    dev = body.v_template.device
-    volume = Volume(net, partition, fp, dense=dense).to(dev)
-    volume.meta = meta
-    volume.eval()
-    # plain attribute, not a submodule: body.to(...) does not move the volume (use body.volume.to(...))
-    object.__setattr__(body, "volume", volume)
-    return volume

@@ -11,8 +11,8 @@ torch.set_num_threads(2)
 
 
 def pytest_collection_modifyitems(config, items):
-    from volsmpl.volume import DEFAULT_CHECKPOINTS
-    has_ckpt = DEFAULT_CHECKPOINTS["volsmpl"].with_suffix(".safetensors").exists()
+    from volsmpl.models import model_kind
+    has_ckpt = model_kind("volsmpl").default_checkpoint.with_suffix(".safetensors").exists()
     for item in items:
         if "needs_checkpoint" in item.keywords and not has_ckpt:
             item.add_marker(pytest.mark.skip(reason="no shipped checkpoint yet (trained by `volsmpl train`)"))

@@ -5,7 +5,9 @@ import json
 
 import pytest
 
-from volsmpl.bench import BenchConfig, PAPER, _estimate_call_s, _fit_budget, compute_ratios
+from volsmpl.bench import BenchConfig, estimate_call_s
+from volsmpl.bench_jobs import fit_budget
+from volsmpl.bench_report import PAPER, compute_ratios
 import volsmpl
 import volsmpl.volume
 from volsmpl.cli import main
@@ -29,6 +31,8 @@ def test_json_has_expected_keys(tiny_run):
                 "evaluate_protocol"):
         assert key in res, key
     assert res["meta"]["threads"] == 1 and res["meta"]["torch"]
+    for key in ("cpu", "cpu_count", "load_avg_1_5_15", "platform", "python", "device", "date", "git_commit"):
+        assert key in res["meta"], key
     assert res["matmul"]["size"] == 256 and res["matmul"]["gflops"] > 0
     assert set(res["models"]) == {"volsmpl", "volsmpl-dense"}
     for name, dense in (("volsmpl", False), ("volsmpl-dense", True)):
@@ -39,7 +43,7 @@ def test_json_has_expected_keys(tiny_run):
                     "decoder_pairs", "flops_per_pair", "evals_per_point", "decoder_gflop", "gflops"):
             assert r[key] is not None, (name, key)
         assert r["batch"] == 1 and r["points"] == 2000 and len(r["t_ms_all"]) == 1
-        shipped = volsmpl.volume.DEFAULT_CHECKPOINTS["volsmpl"].with_suffix(".safetensors").exists()
+        shipped = volsmpl.models.model_kind("volsmpl").default_checkpoint.with_suffix(".safetensors").exists()
         assert r["weights"] == ("trained" if shipped else "random init")
     assert res["accuracy"]["volsmpl"]["status"].startswith("skipped")
 
@@ -72,7 +76,7 @@ def test_markdown_written(tiny_run):
     _, md = tiny_run
     assert md.startswith("# Benchmark")
     for text in ("| volsmpl | 1 |", "| volsmpl-dense | 1 |", "volsmpl-dense/volsmpl", "winding numbers", "torch",
-                 "Table B.4"):
+                 "Table C.4"):
         assert text in md, text
 
 
@@ -110,9 +114,9 @@ def test_missing_checkpoint_is_a_clear_cli_error(tmp_path, capsys):
 
 
 def test_budget_rules():
-    assert _fit_budget(2, 5, 0.1, 120.0) == (2, 5)  # fits: unchanged
-    assert _fit_budget(2, 5, 10.0, 120.0) == (0, 5)  # slow: no warm-up, 2 x 5 x 10 s <= 120 s
-    assert _fit_budget(2, 5, 30.0, 120.0) == (0, 2)
-    assert _fit_budget(2, 5, 500.0, 120.0) == (0, 1)  # always at least one timed run
-    assert _estimate_call_s({}, 8) is None
-    assert _estimate_call_s({"1": {"t_ms": 2000.0}}, 8) == pytest.approx(16.0)
+    assert fit_budget(2, 5, 0.1, 120.0) == (2, 5)  # fits: unchanged
+    assert fit_budget(2, 5, 10.0, 120.0) == (0, 5)  # slow: no warm-up, 2 x 5 x 10 s <= 120 s
+    assert fit_budget(2, 5, 30.0, 120.0) == (0, 2)
+    assert fit_budget(2, 5, 500.0, 120.0) == (0, 1)  # always at least one timed run
+    assert estimate_call_s({}, 8) is None
+    assert estimate_call_s({"1": {"t_ms": 2000.0}}, 8) == pytest.approx(16.0)

@@ -1,6 +1,7 @@
 """Self-intersection app: exact triangle counter, case set, pose repair loop, CLI."""
 from __future__ import annotations
 
+import functools
 import json
 import time
 
@@ -152,10 +153,18 @@ def test_cli_bad_input_messages(tmp_path, capsys):
 
 
 def test_cli_without_checkpoint_stops_with_attach_volume_message(tmp_path, capsys, monkeypatch):
-    from volsmpl import volume as V
-    monkeypatch.setitem(V.DEFAULT_CHECKPOINTS, "coap", tmp_path / "nothing_here")  # as on a body without a shipped one
+    import dataclasses
+
+    from volsmpl.models import MODELS
+    # as on a body without a shipped one
+    monkeypatch.setitem(MODELS, "coap", dataclasses.replace(MODELS["coap"], checkpoint="nothing_here"))
     assert cli_main(["selfpen", "--model", "coap", "--cases", "deep_squat", "--out", str(tmp_path)]) == 2
     assert "no trained coap checkpoint ships for this body" in capsys.readouterr().err
+
+
+@functools.lru_cache(maxsize=1)
+def _default_partition():
+    return volsmpl.Partition(volsmpl.create_body())
 
 
 class _StubVolume(torch.nn.Module):
@@ -169,6 +178,11 @@ class _StubVolume(torch.nn.Module):
         self.pattern = pattern if pattern is not None else [5] * k
         self.values = values
         self.calls = 0
+        self.partition = _default_partition()  # the repair's collidable-pair count reads its face labels
+
+    @property
+    def device(self):
+        return self.w.device
 
     def selfpen_loss(self, out, n_points=300, generator=None, return_points=False, tau=1.0, code_grad=True):
         n = self.pattern[self.calls] if self.calls < len(self.pattern) else 0
@@ -247,7 +261,7 @@ def test_repair_random_volume_and_tpose_unchanged(body, tiny_config):
 
 
 def test_count_collidable_pairs():
-    from volsmpl.apps.selfpen.optimize import count_collidable
+    from volsmpl.apps.selfpen.triangles import count_collidable
     face_labels = np.array([0, 0, 1, 2, 2])  # part of each of 5 faces
     mask = np.array([[0, 0, 1], [0, 0, 0], [1, 0, 0]], dtype=bool)  # only parts 0 and 2 may collide
     pairs = np.array([[0, 1], [0, 2], [1, 3], [4, 0], [2, 3], [3, 4]])
@@ -307,14 +321,6 @@ def test_summary_removed_per_second_by_hand():
     assert s["cases_with_collisions"] == 2 and s["total_s"] == pytest.approx(1.0)
 
 
-def test_clip_joint_step_by_hand():
-    from volsmpl.apps.selfpen.optimize import clip_joint_step
-    g = torch.zeros(69)
-    g[3:6] = torch.tensor([30.0, 40.0, 0.0])  # joint 1: lr * |g| = 0.5 rad
-    g[9] = 10.0                                # joint 3: 0.1 rad
-    f = clip_joint_step(g, lr=0.01, max_step=0.2)
-    assert f == pytest.approx(0.4) and float((0.01 * g[3:6]).norm()) == pytest.approx(0.2)
-    assert float(g[9]) == pytest.approx(4.0)  # the whole step scaled: direction kept
-    assert clip_joint_step(g, lr=0.01, max_step=1.0) == 1.0 and float(g[9]) == pytest.approx(4.0)
+def test_negative_max_step_is_refused():
     with pytest.raises(ValueError, match="max_step"):
         SelfPenConfig(max_step=-0.1)

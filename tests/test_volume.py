@@ -225,9 +225,12 @@ def test_chunking_bounded(vbody):
 
 
 def test_attach_without_checkpoint_explains(monkeypatch, tmp_path):
-    import volsmpl.volume as vm
+    import dataclasses
+
+    from volsmpl.models import MODELS
     b = volsmpl.create_body()
-    monkeypatch.setitem(vm.DEFAULT_CHECKPOINTS, "volsmpl", tmp_path / "none")  # as if no checkpoint shipped
+    # as if no checkpoint shipped
+    monkeypatch.setitem(MODELS, "volsmpl", dataclasses.replace(MODELS["volsmpl"], checkpoint="none"))
     with pytest.raises(FileNotFoundError, match="volsmpl train"):
         volsmpl.attach_volume(b)
     with pytest.raises(ValueError, match="unknown model"):
@@ -475,8 +478,8 @@ def test_selfpen_rigid_code_gradient():
     l_rigid, g_rigid = loss_grad(p0, False)
     assert seen == [True, False]
     torch.testing.assert_close(l_full, l_rigid)
-    # 0.963 on this case with the shipped checkpoint (session 11's 0.949, session 10's 0.958, session 7's 0.944, session
-    # 6's 0.931; lowest of the 17: 0.879, sitting_on_heels; median 0.997)
+    # 0.963 on this case with the shipped checkpoint (runs/volsmpl_b8p step 33,000; earlier checkpoints 0.931 .. 0.958;
+    # lowest of the 17 cases: 0.879, sitting_on_heels; median 0.997)
     assert torch.nn.functional.cosine_similarity(g_full.flatten(), g_rigid.flatten(), dim=0) > 0.88
 
 
@@ -487,7 +490,7 @@ def test_queries_encode_only_parts_holding_points(model):
     values and gradients (pose, shape, translation, points) equal those of the all-parts encoding, and a
     later query elsewhere on the same output encodes the missing parts (and equals the full one too)."""
     # float64: the subset and the all-parts encodings batch the encoder differently (K' vs K parts); in float32
-    # the summation order alone moves the pose gradient by up to 0.4 % (measured with the session-11 checkpoint)
+    # the summation order alone moves the pose gradient by up to 0.4 % (measured with runs/volsmpl_b8o step 28,500)
     b = volsmpl.create_body().to(torch.float64)
     vol = volsmpl.attach_volume(b, model=model).eval().to(torch.float64)
     encoded = []
@@ -509,7 +512,7 @@ def test_queries_encode_only_parts_holding_points(model):
             d = vol.query(out, pts)
             parts = vol.query_parts(out, pts)
             assert torch.equal(vol.collision_loss(out, pts, reduction="none"),
-                               torch.relu(-d) if vol.is_sdf else torch.relu(d - vol.level))
+                               torch.relu(-d) if vol.is_sdf else d * (d > vol.level))  # paper, supp. D.2
         grads = torch.autograd.grad(d.sum() + parts.clamp(-1, 1).sum(), (q["body_pose"], q["betas"], q["transl"], pts))
         return [d.detach(), parts.detach(), *grads]
 

@@ -140,8 +140,7 @@ def generate_cases(body=None, recipes=RECIPES, log=None) -> list[dict]:
     """
     from volsmpl import create_body
     from volsmpl.partition import Partition
-    from .optimize import count_collidable
-    from .triangles import body_collisions
+    from .triangles import body_collisions, count_collidable
 
     body = body or create_body()
     part = Partition(body)

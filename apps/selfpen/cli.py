@@ -1,5 +1,6 @@
-"""`volsmpl selfpen`: repair self-intersecting bodies with VolumetricSMPL and/or COAP (Table 4 / B).
+"""`volsmpl selfpen`: repair self-intersecting bodies with VolumetricSMPL, COAP and/or the exact mesh (Table 6).
 
+    volsmpl selfpen --model volsmpl,coap,mesh
     volsmpl selfpen --model volsmpl,coap --checkpoint-volsmpl runs/v.safetensors --checkpoint-coap runs/c.safetensors
     volsmpl selfpen --model volsmpl --cases deep_squat,arm_through_head --random-init --max-iters 20
 
@@ -16,6 +17,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from volsmpl.models import model_kind, parse_models
+from volsmpl.provenance import machine_info
+
 from .cases import CASES_FILE, load_cases
 from .optimize import PAPER, PRESETS, SelfPenConfig, format_table, repair_case, summarize
 
@@ -24,10 +28,11 @@ HIGHLIGHT, GREY = (0.9, 0.1, 0.1), (0.75, 0.75, 0.75)
 
 def add_parser(sub):
     d = SelfPenConfig()
-    p = sub.add_parser("selfpen", help="resolve self-intersections by pose optimisation (Sec. 5.2.4, Table 4/B)",
+    p = sub.add_parser("selfpen", help="resolve self-intersections by pose optimisation (Sec. 4.2.4, Table 6)",
                        description="Optimise the pose of self-intersecting bodies against the volumetric "
                                    "self-penetration loss; report time, memory, iterations, triangle collisions.")
-    p.add_argument("--model", default="volsmpl,coap", help="comma-separated: volsmpl, coap (default both)")
+    p.add_argument("--model", default="volsmpl,coap,mesh",
+                   help="comma-separated model kinds: volsmpl, coap, mesh (the exact reference); default all three")
     p.add_argument("--cases", default="all", help="comma-separated case names from the case file, or 'all'")
     p.add_argument("--case-file", default=str(CASES_FILE), help="JSON case file (default: the shipped 17 cases)")
     p.add_argument("--out", default="out/selfpen", help="output folder (results.json, render_*.png)")
@@ -62,23 +67,17 @@ def add_parser(sub):
     return p
 
 
-def parse_models(text: str) -> list[str]:
-    from volsmpl.volume import MODELS
-
-    models = [m.strip() for m in text.split(",") if m.strip()]
-    bad = [m for m in models if m not in MODELS]
-    if bad or not models:
-        raise ValueError(f"unknown model(s) {bad or text!r}; --model takes a comma-separated list of {', '.join(MODELS)}")
-    return list(dict.fromkeys(models))
-
-
 def _checkpoints(args, models: list[str]) -> dict:
-    ck = {"volsmpl": args.checkpoint_volsmpl, "coap": args.checkpoint_coap}
+    ck = {m: None for m in models}
+    ck.update({m: c for m, c in (("volsmpl", args.checkpoint_volsmpl), ("coap", args.checkpoint_coap)) if c and m in ck})
     if args.checkpoint is not None:
         if len(models) != 1:
             raise ValueError("--checkpoint needs exactly one --model; use --checkpoint-volsmpl / --checkpoint-coap for several")
         ck[models[0]] = args.checkpoint
-    if args.random_init and any(ck[m] for m in models):
+    for m, c in ck.items():
+        if c is not None and not model_kind(m).learned:
+            raise ValueError(f"model '{m}' has no weights: drop its checkpoint")
+    if args.random_init and any(ck.values()):
         raise ValueError("--random-init and a checkpoint exclude each other")
     return ck
 
@@ -121,7 +120,7 @@ def run(args) -> int:
     body = volsmpl.create_body().to(cfg.device)
     volumes = {}
     for m in models:  # fail early (missing checkpoint) before any work
-        if args.random_init:
+        if args.random_init and model_kind(m).learned:
             volumes[m] = volsmpl.attach_volume(body, model=m, pretrained=False)
         else:
             volumes[m] = volsmpl.attach_volume(body, checkpoint=ckpts[m], model=m)
@@ -155,11 +154,12 @@ def run(args) -> int:
           "apart (not the same part, not neighbours or ignored pairs); memory: " + ", ".join(sorted({s['memory_kind'] for s in summaries.values() if s['memory_kind']})))
     result = {
         "config": asdict(cfg), "preset": args.preset, "models": models, "random_init": bool(args.random_init),
-        "checkpoints": {m: (None if args.random_init else str(ckpts[m] or "shipped")) for m in models},
+        "checkpoints": {m: (str(ckpts[m] or "shipped") if model_kind(m).learned and not args.random_init else None)
+                        for m in models},
         "case_file": str(args.case_file), "paper": PAPER, "summary": summaries,
         "cases": {m: [r.to_json() for r in rs] for m, rs in per_model.items()},
         "device": torch.cuda.get_device_name(0) if cfg.device == "cuda" else "cpu",
-        "threads": torch.get_num_threads(),
+        "threads": torch.get_num_threads(), "meta": machine_info(cfg.device),
     }
     (out / "results.json").write_text(json.dumps(result, indent=1))
     print(f"wrote {out / 'results.json'}" + (f" and {rendered} render(s)" if rendered else ""))

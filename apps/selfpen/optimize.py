@@ -1,12 +1,12 @@
-"""Pose repair of self-intersecting bodies with a volumetric self-penetration loss (paper Sec. 5.2.4,
-supplementary C.4, Table 4 / B).
+"""Pose repair of self-intersecting bodies with a volumetric self-penetration loss (paper Sec. 4.2.4,
+supplementary D.4, Table 6), on the shared optimisation harness (volsmpl.optim).
 
 For one body (betas, global_orient, body_pose theta_0) minimise over the body pose theta
 
     L(theta) = w_selfpen * selfpen_loss(body(theta)) + w_prior * ||theta - theta_0||^2
 
 with SGD, at most `max_iters` steps, stopping as soon as the self-penetration loss samples no
-point inside two colliding parts (the list of points returned by `Volume.selfpen_loss` is empty)
+point inside two colliding parts (the list of points returned by `selfpen_loss` is empty)
 in `stop_checks` independent draws in a row (the paper stops on the first empty draw: 1; a draw
 that finds points again is the one the next step uses, so re-checks never cost a step), or when
 the self-penetration term has found no new low (by more than `stall_rtol`, the sampling noise of one
@@ -14,30 +14,30 @@ draw) in `patience` steps (an equilibrium with the prior:
 the paper has no such rule and runs on to the cap; patience 0 does the same).
 Defaults are the values of our tuning run (PRESETS; the paper's are a preset). The repair is measured with the exact
 triangle-collision metric (`triangles.body_collisions`) before and after, and by the geodesic
-change of each joint's rotation.
+change of each joint's rotation. Any model kind works ('volsmpl', 'coap', 'mesh'): the loop only calls
+`volume.selfpen_loss`.
 
     res = repair_case(body, volume, case, SelfPenConfig())
 """
 from __future__ import annotations
 
-import time
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import torch
 
+from volsmpl import paper
+from volsmpl.optim import MaxIters, Patience, StopWhen, Term, Variable, optimize
+
 from .cases import Case
-from .triangles import body_collisions
+from .triangles import body_collisions, count_collidable
 
-# Table 4 / B of the paper (RTX 3090, PROX cases, SMPL-X): per-step time (ms), per-step memory (GB),
+# Table 6 of the paper (RTX 3090, PROX cases, SMPL-X): per-step time (ms), per-step memory (GB),
 # iterations, total time (s), mesh triangle collisions after repair.
-PAPER = {
-    "coap": {"step_ms": 30.0, "memory_gb": 6.2, "iterations": 9.75, "total_s": 0.29, "collisions": 74},
-    "volsmpl": {"step_ms": 14.0, "memory_gb": 1.8, "iterations": 7.37, "total_s": 0.10, "collisions": 68},
-}
+PAPER = paper.rows("selfpen")
 
 
-# The paper's values (Sec. 5.2.4: lr 1e-5, pose-prior weight 1e3, self-penetration weight 0.1, stop on the first
+# The paper's values (Sec. 4.2.4: lr 1e-5, pose-prior weight 1e3, self-penetration weight 0.1, stop on the first
 # empty draw, the SDF read in metres: tau 1, plain SGD) and the values of our one tuning run for both models
 # (apps/selfpen/tune.py, all 17 cases, docs/selfpen_tune.json): the paper's lr * w_prior (1e-2) kept, the SDF read in
 # centimetres (tau 1 cm: the sharpness of COAP's occupancy), every step limited to 0.1 rad per joint (plain SGD flung
@@ -55,7 +55,7 @@ PRESETS = {
 @dataclass
 class SelfPenConfig:
     """Repair hyper-parameters. Defaults: the tuned preset (PRESETS['tuned']); 200 iterations and 300
-    points per box pair as the paper (supp. C.4). `SelfPenConfig.preset('paper')` gives the paper's."""
+    points per box pair as the paper (supp. D.4). `SelfPenConfig.preset('paper')` gives the paper's."""
 
     lr: float = PRESETS["tuned"]["lr"]
     max_iters: int = 200
@@ -121,9 +121,9 @@ class RepairResult:
     raw_after: int = 0
     # pose-induced pairs whose triangles lie on two parts that may collide (partition.collision_mask): the
     # collisions a volumetric self-penetration loss can see; the rest are same-part or neighbouring-part
-    # pairs (LBS folds at joints), left alone by design. None when the volume has no partition.
-    collidable_before: int | None = None
-    collidable_after: int | None = None
+    # pairs (LBS folds at joints), left alone by design.
+    collidable_before: int = 0
+    collidable_after: int = 0
     pose_change_deg: float = 0.0  # mean over the 23 body joints of the geodesic rotation change
     loss: list = field(default_factory=list)  # total loss per step
     points: list = field(default_factory=list)  # penetration samples per evaluation
@@ -140,15 +140,6 @@ class RepairResult:
         return d
 
 
-def count_collidable(pairs: np.ndarray, face_labels, collision_mask) -> int:
-    """Number of triangle pairs (P, 2) whose faces lie on two different parts allowed to collide."""
-    if len(pairs) == 0:
-        return 0
-    lab = np.asarray(face_labels)[np.asarray(pairs)]  # (P, 2) part of each triangle
-    mask = np.asarray(collision_mask, dtype=bool)
-    return int((mask[lab[:, 0], lab[:, 1]] & (lab[:, 0] != lab[:, 1])).sum())
-
-
 def pose_change_deg(pose0, pose1) -> float:
     """Mean geodesic angle (degrees) between the joint rotations of two (69,) axis-angle body poses."""
     from scipy.spatial.transform import Rotation
@@ -156,39 +147,6 @@ def pose_change_deg(pose0, pose1) -> float:
     a = Rotation.from_rotvec(np.asarray(pose0, np.float64).reshape(-1, 3))
     b = Rotation.from_rotvec(np.asarray(pose1, np.float64).reshape(-1, 3))
     return float(np.degrees((a.inv() * b).magnitude()).mean())
-
-
-class _Memory:
-    """Peak memory of a block above what was in use at its start: CUDA allocator stats, or sampled RSS on CPU."""
-
-    def __init__(self, device: torch.device):
-        self.device, self.peak, self.kind = device, 0, ""
-
-    def __enter__(self):
-        if self.device.type == "cuda":
-            torch.cuda.synchronize(self.device)
-            torch.cuda.reset_peak_memory_stats(self.device)
-            self.base = torch.cuda.memory_allocated(self.device)
-        else:
-            from volsmpl.evaluate import _malloc_trim, _rss_bytes, _RssSampler
-            _malloc_trim()
-            self.base = _rss_bytes()
-            self.sampler = _RssSampler().__enter__()
-        return self
-
-    def __exit__(self, *exc):
-        if self.device.type == "cuda":
-            torch.cuda.synchronize(self.device)
-            self.peak, self.kind = torch.cuda.max_memory_allocated(self.device) - self.base, "cuda max_memory_allocated"
-        else:
-            self.sampler.__exit__(*exc)
-            self.peak, self.kind = max(0, self.sampler.peak - self.base), "process RSS (sampled)"
-        return False
-
-
-def _sync(device: torch.device):
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
 
 
 def check_case(case: Case) -> None:
@@ -222,11 +180,9 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
         final_pose = _optimise(body, volume, case, cfg, dev, res)
     after = before if final_pose is case.body_pose else body_collisions(body, case.betas, case.global_orient, final_pose)
     res.collisions_after, res.raw_after = len(after["pairs"]), len(after["raw"])
-    part = getattr(volume, "partition", None)
-    if part is not None:
-        fl, cm = part.face_labels.cpu().numpy(), part.collision_mask.cpu().numpy()
-        res.collidable_before = count_collidable(before["pairs"], fl, cm)
-        res.collidable_after = count_collidable(after["pairs"], fl, cm)
+    fl, cm = volume.partition.face_labels.cpu().numpy(), volume.partition.collision_mask.cpu().numpy()
+    res.collidable_before = count_collidable(before["pairs"], fl, cm)
+    res.collidable_after = count_collidable(after["pairs"], fl, cm)
     res.pose_change_deg = pose_change_deg(case.body_pose, final_pose)
     res.body_pose = final_pose.tolist()
     if keep_meshes:
@@ -236,78 +192,43 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
 
 
 def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, res: RepairResult) -> torch.Tensor:
-    """The SGD loop; fills res (status, iterations, timings, memory, losses) and returns the final (69,) pose."""
-    body_dev = body.v_template.device
-    if body_dev != dev or next(volume.parameters()).device != dev:
-        raise ValueError(f"body and volume must be on {dev} (got body on {body_dev}); move them with .to('{dev}') first")
+    """The SGD loop on the harness; fills res (status, iterations, timings, memory, losses) and returns the final
+    (69,) pose."""
+    if body.v_template.device != dev or volume.device != dev:
+        raise ValueError(f"body and volume must be on {dev} (got body on {body.v_template.device}, volume on "
+                         f"{volume.device}); move them with .to('{dev}') first")
     betas = case.betas.reshape(1, -1).to(dev)
     orient = case.global_orient.reshape(1, 3).to(dev)
     theta0 = case.body_pose.reshape(1, -1).to(dev)
-    theta = theta0.clone().requires_grad_(True)
-    opt = torch.optim.SGD([theta], lr=cfg.lr)
     gen = torch.Generator().manual_seed(cfg.seed)  # CPU generator: identical samples on every device
-    flags = [p.requires_grad for p in volume.parameters()]
-    for p in volume.parameters():
-        p.requires_grad_(False)  # only the pose is optimised
-    res.status = "max_iters"
-    best_pen, since_best = float("inf"), 0
-    try:
-        with _Memory(dev) as mem:
-            _sync(dev)
-            t_start = time.perf_counter()
-            for it in range(cfg.max_iters + 1):
-                t0 = time.perf_counter()
-                out = body(betas=betas, global_orient=orient, body_pose=theta)
-                for _ in range(cfg.stop_checks):  # re-draw while empty, up to stop_checks draws
-                    sp, pts = volume.selfpen_loss(out, n_points=cfg.n_points, generator=gen, return_points=True,
-                                                  tau=cfg.tau, code_grad=cfg.code_grad)
-                    res.points.append(int(pts[0].shape[0]))
-                    if pts[0].shape[0] > 0:
-                        break
-                if pts[0].shape[0] == 0:
-                    res.status = "no_volume_points" if it == 0 else "resolved"
-                    break
-                if it == cfg.max_iters:
-                    break
-                pen = float(sp[0].detach())
-                if pen < best_pen * (1.0 - cfg.stall_rtol):
-                    best_pen, since_best = pen, 0
-                else:
-                    since_best += 1
-                if cfg.patience and since_best >= cfg.patience:
-                    res.status = "stalled"
-                    break
-                loss = cfg.w_selfpen * sp[0] + cfg.w_prior * ((theta - theta0) ** 2).sum()
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                if cfg.max_step:
-                    clip_joint_step(theta.grad, cfg.lr, cfg.max_step)
-                opt.step()
-                _sync(dev)
-                res.step_ms.append((time.perf_counter() - t0) * 1e3)
-                res.loss.append(float(loss.detach()))
-                res.iterations += 1
-            _sync(dev)
-            res.total_s = time.perf_counter() - t_start
-        res.peak_memory_bytes, res.memory_kind = int(mem.peak), mem.kind
-    finally:
-        for p, f in zip(volume.parameters(), flags):
-            p.requires_grad_(f)
-    pose = theta.detach()[0].cpu()
-    if not torch.isfinite(pose).all():
-        raise RuntimeError(f"case {case.name!r}: the pose became NaN/Inf during optimisation; lower --lr")
-    return pose
 
+    def selfpen(state):
+        for _ in range(cfg.stop_checks):  # re-draw while empty, up to stop_checks draws
+            sp, pts = volume.selfpen_loss(state.out, n_points=cfg.n_points, generator=gen, return_points=True,
+                                          tau=cfg.tau, code_grad=cfg.code_grad)
+            res.points.append(int(pts[0].shape[0]))
+            if pts[0].shape[0] > 0:
+                break
+        return sp, {"points": int(pts[0].shape[0])}
 
-def clip_joint_step(grad: torch.Tensor, lr: float, max_step: float) -> float:
-    """Scale the pose gradient (..., 23*3) in place so that no joint's SGD step lr * grad_j (axis-angle, 3 values)
-    is longer than max_step radians; returns the factor (1 when no joint exceeds it). The whole gradient is
-    scaled, so the step keeps its direction (a trust region, not per-joint clipping)."""
-    longest = float((lr * grad.detach().reshape(-1, 3)).norm(dim=-1).max())
-    factor = min(1.0, max_step / longest) if longest > 0 else 1.0
-    if factor < 1.0:
-        grad.mul_(factor)
-    return factor
+    stops = [StopWhen(lambda ev: ev.info["selfpen"]["points"] == 0, "resolved"), MaxIters(cfg.max_iters)]
+    if cfg.patience:
+        stops.append(Patience("selfpen", cfg.patience, cfg.stall_rtol))
+    run = optimize(
+        {"body_pose": Variable(theta0.clone(), max_step=cfg.max_step or None, group=3)},
+        {"selfpen": Term(selfpen, cfg.w_selfpen),
+         "prior": Term(lambda s: ((s.body_pose - theta0) ** 2).sum(dim=1), cfg.w_prior)},
+        prepare=lambda s: {"out": body(betas=betas, global_orient=orient, body_pose=s.body_pose)},
+        optimizer="sgd", lr=cfg.lr, stops=stops, frozen=[volume], device=dev, progress=False)
+    res.iterations = run.iterations[0]
+    res.status = run.status[0]
+    if res.status == "resolved" and res.iterations == 0:
+        res.status = "no_volume_points"
+    res.step_ms = run.step_ms()
+    res.loss = [r.total[0] for r in run.records if r.updated]
+    res.total_s = run.seconds
+    res.peak_memory_bytes, res.memory_kind = int(run.peak_bytes), run.memory_kind
+    return run.variables["body_pose"][0].cpu()
 
 
 def summarize(results: list[RepairResult]) -> dict:
@@ -339,11 +260,11 @@ def summarize(results: list[RepairResult]) -> dict:
 
 
 def format_table(summaries: dict) -> str:
-    """Our rows (model -> summarize(...)) beside the paper's Table 4 / B."""
+    """Our rows (model -> summarize(...)) beside the paper's Table 6."""
     head = (f"{'':24s} {'step ms':>8s} {'mem GB':>8s} {'iters':>7s} {'total s':>8s} {'coll. before':>12s} {'coll. after':>11s} "
             f"{'pose chg deg':>12s} {'collidable parts':>16s} {'removed/s':>9s}")
     lines = [head, "-" * len(head)]
-    names = {"volsmpl": "VolumetricSMPL", "coap": "COAP"}
+    names = {"volsmpl": "VolumetricSMPL", "coap": "COAP", "mesh": "exact mesh"}
     for m, s in summaries.items():
         lines.append(f"{'ours ' + names.get(m, m):24s} {s['step_ms']:8.1f} {s['memory_gb']:8.3f} {s['iterations']:7.2f} "
                      f"{s['total_s']:8.3f} {s['collisions_before']:12.1f} {s['collisions_after']:11.1f} {s['pose_change_deg']:12.3f} "

@@ -1,5 +1,5 @@
 """Exact triangle-triangle self-intersection count of a mesh (the "mesh triangle collisions" metric
-of the paper's Table 4 / B, after Pavlakos et al. 2019).
+of the paper's Table 6, after Pavlakos et al. 2019).
 
     pairs = intersecting_pairs(vertices, faces)     # (P, 2) face ids, i < j
     n = count_intersections(vertices, faces)        # P
@@ -331,14 +331,24 @@ def body_collisions(body, betas, global_orient, body_pose, tol: float = DEFAULT_
     """
     import torch
 
-    faces = np.asarray(body.faces)
+    faces = np.asarray(torch.as_tensor(body.faces).cpu())
+    dev = body.v_template.device
     with torch.no_grad():
-        b = torch.as_tensor(betas, dtype=torch.float32).reshape(1, -1)
-        posed = body(betas=b, global_orient=torch.as_tensor(global_orient, dtype=torch.float32).reshape(1, 3),
-                     body_pose=torch.as_tensor(body_pose, dtype=torch.float32).reshape(1, -1))
+        b = torch.as_tensor(betas, dtype=torch.float32).reshape(1, -1).to(dev)
+        posed = body(betas=b, global_orient=torch.as_tensor(global_orient, dtype=torch.float32).reshape(1, 3).to(dev),
+                     body_pose=torch.as_tensor(body_pose, dtype=torch.float32).reshape(1, -1).to(dev))
         rest = body(betas=b)
     v = posed.vertices[0].double().cpu().numpy()
     rest_pairs = intersecting_pairs(rest.vertices[0].double().cpu().numpy(), faces, tol)
     raw = intersecting_pairs(v, faces, tol)
     pairs = raw[~np.isin(_pair_keys(raw, len(faces)), _pair_keys(rest_pairs, len(faces)))] if len(rest_pairs) else raw
     return {"pairs": pairs, "raw": raw, "rest": rest_pairs, "vertices": v}
+
+
+def count_collidable(pairs: np.ndarray, face_labels, collision_mask) -> int:
+    """Number of triangle pairs (P, 2) whose faces lie on two different parts allowed to collide."""
+    if len(pairs) == 0:
+        return 0
+    lab = np.asarray(face_labels)[np.asarray(pairs)]  # (P, 2) part of each triangle
+    mask = np.asarray(collision_mask, dtype=bool)
+    return int((mask[lab[:, 0], lab[:, 1]] & (lab[:, 0] != lab[:, 1])).sum())

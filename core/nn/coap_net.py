@@ -397,6 +397,10 @@ class CoapNet(nn.Module):
         return self._run(x_local, group, self._tables(code, False), None)
 
     # ------------------------------------------------------------------ costs
+    def set_tile_rows(self, rows: int) -> None:
+        """Rows per cache tile of the no-grad path (benchmarks of one-pass evaluation set it very large)."""
+        self.TILE_ROWS = int(rows)
+
     def flops_per_pair(self) -> int:
         """2 x multiply-accumulates of one pair through query encoder + decoder, after folding
         (one-hot, z and the inside flag folded into biases)."""

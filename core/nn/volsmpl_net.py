@@ -60,3 +60,11 @@ class VolumetricSMPLNet(nn.Module):
     def decode_pairs(self, x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor, code: PartCode) -> torch.Tensor:
         """x_local (M, 3) in the frame of part part_idx of body body_idx -> (M,)."""
         return self.decoder.decode_pairs(x_local, body_idx, part_idx, code.weights)
+
+    def flops_per_pair(self) -> int:
+        """FLOPs of one (point, part) decoder evaluation (the NBW decoder's)."""
+        return self.decoder.flops_per_pair()
+
+    def set_tile_rows(self, rows: int) -> None:
+        """Rows per cache tile of the no-grad pair path (benchmarks of one-pass evaluation set it very large)."""
+        self.decoder.TILE_ROWS = int(rows)

@@ -1,0 +1,67 @@
+"""`attach_volume(body, model=...)`: build the volume of a registered model kind (volsmpl.models) for a
+body and attach it as `body.volume`."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .body.fingerprint import fingerprint_of_model
+from .checkpoint import load_checkpoint
+from .models import kind_of_config, model_kind
+from .partition import Partition
+
+
+def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool = True, model: str = "volsmpl",
+                  config=None, dense: bool = False):
+    """Attach a volumetric model as `body.volume` (and return it).
+
+    Args:
+        body: volsmpl.Body or smplx SMPL / SMPL-H / SMPL-X model.
+        checkpoint: trained weights (path with or without .safetensors); default: the shipped checkpoint
+            of `model` for the default body.
+        pretrained: False gives randomly initialised weights (tests, or the start of training).
+        model: a registered kind (volsmpl.models.MODELS): 'volsmpl' (signed distance, this paper), 'coap'
+            (occupancy baseline, COAP) or 'mesh' (exact signed distance to the posed mesh, no weights).
+        config: architecture for pretrained=False (VolumeConfig / CoapConfig; checkpoints carry their own).
+        dense: use the dense reference query path (every part decoder on every point).
+    Example:
+        >>> body = volsmpl.create_body()
+        >>> volume = attach_volume(body, model="mesh")
+    """
+    kind = model_kind(model)
+    fp = fingerprint_of_model(body)
+    if not kind.learned:
+        from .mesh_volume import MeshVolume
+        if checkpoint is not None or config is not None:
+            raise ValueError(f"model '{model}' has no weights: pass neither checkpoint nor config")
+        volume = MeshVolume(Partition(body), fp).to(body.v_template.device)
+        object.__setattr__(body, "volume", volume)
+        return volume
+    from .volume import Volume
+
+    meta, state = {}, None
+    if pretrained:
+        path = Path(checkpoint) if checkpoint is not None else kind.default_checkpoint
+        if checkpoint is None and not Path(str(path) + ".safetensors").exists():
+            raise FileNotFoundError(
+                f"no trained {model} checkpoint ships for this body (fingerprint {fp}). Train one with "
+                f"`volsmpl train` and pass checkpoint=PATH, or use attach_volume(body, pretrained=False) for random weights.")
+        state, cfg_dict, meta = load_checkpoint(path, expected_fingerprint=fp)
+        held = kind_of_config(cfg_dict)
+        if held != model:
+            raise ValueError(f"{path} holds a {held} model; call attach_volume(body, checkpoint=..., model='{held}').")
+        config = kind.config_from_dict(cfg_dict)
+    partition = Partition(body, n_samples=(config.n_surface_samples if config else 1000),
+                          box_padding=(config.box_padding if config else 0.125))
+    net = kind.build_network(partition.num_parts, config)
+    if state is not None:
+        try:
+            net.load_state_dict(state)
+        except RuntimeError as e:
+            raise ValueError(f"checkpoint {checkpoint} does not fit the {model} network for this body "
+                             f"({partition.num_parts} parts): {str(e)[:300]}") from e
+    volume = Volume(net, partition, fp, dense=dense).to(body.v_template.device)
+    volume.meta = meta
+    volume.eval()
+    # plain attribute, not a submodule: body.to(...) does not move the volume (use body.volume.to(...))
+    object.__setattr__(body, "volume", volume)
+    return volume

@@ -1,0 +1,46 @@
+"""`BodyVolume`: what every model kind answers (volsmpl.models), so the apps never branch on the kind.
+
+    d = volume.signed(out, points)          # (B, N): negative inside, positive outside, 0 on the surface
+    loss = volume.collision_loss(out, points)
+    loss = volume.selfpen_loss(out)         # (B,)
+
+Subclasses: `Volume` (the learned kinds 'volsmpl' and 'coap') and `MeshVolume` (the exact 'mesh' kind).
+"""
+from __future__ import annotations
+
+import torch
+
+from .collision import reduce_penetration
+
+
+def check_output(out) -> None:
+    """A clear error unless `out` is a body forward output (vertices, joints, full_pose tensors)."""
+    for name in ("vertices", "joints", "full_pose"):
+        if not torch.is_tensor(getattr(out, name, None)):
+            raise TypeError(f"expected a body forward output with tensor '{name}' (call body(...) first), got {type(out).__name__}")
+
+
+class BodyVolume(torch.nn.Module):
+    """The interface (module docstring). A subclass sets `kind` and `partition` and implements `query`,
+    `query_parts`, `to_signed`, `occupied`, `penetration`, `selfpen_loss` and `extract_mesh`."""
+
+    kind: str = ""
+
+    @property
+    def device(self) -> torch.device:
+        return self.partition.faces.device
+
+    @property
+    def num_parts(self) -> int:
+        return self.partition.num_parts
+
+    def signed(self, out, points: torch.Tensor) -> torch.Tensor:
+        """`query` in the sign convention every kind shares: negative inside, positive outside, 0 on the surface.
+        points (B, N, 3) or (N, 3) -> (B, N)."""
+        return self.to_signed(self.query(out, points))
+
+    def collision_loss(self, out, points: torch.Tensor, reduction: str = "mean") -> torch.Tensor:
+        """Penetration of points into the bodies (the kind's `penetration` of its query values, as the paper
+        scores scene points, supp. D.2). reduction: 'mean' (scalar over all bodies and points), 'sum' (per
+        body, (B,)) or 'none' ((B, N))."""
+        return reduce_penetration(self.penetration(self.query(out, points)), reduction)

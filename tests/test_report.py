@@ -1,0 +1,173 @@
+"""volsmpl report: tables beside the paper's, provenance, staleness from git, missing results, CLI errors."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from volsmpl import report
+from volsmpl.cli import main
+
+
+class NoGit:
+    available, reason = False, "no git in this test"
+
+    def head(self):
+        return None
+
+
+def write(path: Path, data) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data) if not isinstance(data, str) else data)
+    return path
+
+
+HOI = {"summary": {"volsmpl": {"iter_ms": 12.5, "total_min": 0.2, "collision_pct": 4.1, "contact_cm": 3.3,
+                               "steps": 1000},
+                   "mesh": {"iter_ms": 900.0, "total_min": 15.0, "collision_pct": 6.0, "contact_cm": 3.1}},
+       "paper": {"volsmpl": {"iter_ms": 4.28}}, "cases": [{"name": "a"}, {"name": "b"}], "figures": ["fig.png"],
+       "meta": {"git_commit": "abc1234", "date": "2026-11-20T10:00:00+00:00", "device": "cuda: H100"},
+       "checkpoints": {"volsmpl": "shipped"}}
+
+
+def test_app_table_beside_the_paper_and_missing_ones_listed(tmp_path):
+    res = write(tmp_path / "out" / "hoi" / "results.json", HOI)
+    (tmp_path / "out" / "hoi" / "fig.png").write_bytes(b"png")
+    write(tmp_path / "docs" / "eval_coap_anny.json", {"metrics": {"iou_mean": 0.5, "iou_surf": 0.4, "iou_unif": 0.6},
+                                                     "config": {"device": "cpu"}})
+    text, status = report.build_report(tmp_path / "docs" / "report.md", root=tmp_path, git=NoGit())
+    hoi = text[text.index("## Human-object"):]
+    assert "| ours: volsmpl | 12.50 | 0.200 | 4.10 | 3.30 | 1,000 |" in hoi  # ours, with the extra metric
+    assert "| paper: w. Ours | 4.28 | 0.57 | 5.73 | 3.96 |" in hoi               # the paper's row beside
+    assert "| paper: w. SDF [Wang et al.] | 2128.2 | 35.9 | 6.33 | 3.2 |" in hoi
+    assert "2 per-case records" in hoi and "![fig](../out/hoi/fig.png)" in hoi
+    assert "abc1234" in hoi and "2026-11-20T10:00:00+00:00" in hoi and "cuda: H100" in hoi and "volsmpl: shipped" in hoi
+    assert "git unavailable (no git in this test)" in hoi
+    # eval: COAP's row from a synthetic JSON with the paper's rows; fields the JSON lacks say so
+    ev = text[text.index("## Volumetric bodies: accuracy"):text.index("## Volumetric bodies: time")]
+    assert "| ours: COAP | 50.00 | 40.00 | 60.00 |" in ev and "| paper: COAP | 94.31 | 93.98 | 94.63 |" in ev
+    assert "| `eval_coap` |" in ev and "not recorded" in ev
+    # what is missing, with the commands
+    missing = text[text.index("## Results still missing"):text.index('<a id="eval">')]
+    for cmd in ("volsmpl egohmr --out out/egohmr", "volsmpl motion --out out/motion",
+                "volsmpl eval --out docs/eval_volsmpl_anny.json", "volsmpl bench --out docs/bench_cpu.json"):
+        assert f"`{cmd}" in missing
+    assert "`hoi`" not in missing and "hoi" not in status["missing"]
+    assert {"egohmr", "motion", "eval_volsmpl", "bench", "selfpen"} <= set(status["missing"])
+    assert "No results yet: run `volsmpl egohmr --out out/egohmr`." in text
+    assert sorted(status["unknown"]) == ["eval_coap", "hoi"]
+
+
+def test_motion_back_ends_split_over_tables_5_and_d1(tmp_path):
+    res = write(tmp_path / "m.json", {"summary": {"volsmpl": {"frame_ms": 9.0}, "coap_w0.01": {"frame_ms": 70.0}}})
+    text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"motion": res}, git=NoGit())
+    t5 = text[text.index("Paper Table 5"):text.index("Paper Table D.1")]
+    d1 = text[text.index("Paper Table D.1"):]
+    assert "ours: volsmpl" in t5 and "ours: coap_w0.01" not in t5 and "71*" in t5 and "16 frames only" in t5
+    assert "| ours: coap_w0.01 | - | 70.00 | - | - |" in d1
+    assert "| paper: w. COAP (w=0.01) | 4.44 | 26.48 | 4.92 | 0.02 |" in d1
+
+
+def test_paper_mismatch_is_noted(tmp_path):
+    res = write(tmp_path / "s.json", {"summary": {"volsmpl": {"step_ms": 1.0}},
+                                      "paper": {"volsmpl": {"step_ms": 15.0}}})
+    text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"selfpen": res}, git=NoGit())
+    assert "volsmpl.step_ms: 15.0 (paper: 14)" in text
+
+
+def _git(repo: Path, *args, date: str | None = None) -> str:
+    env = dict(os.environ, GIT_AUTHOR_NAME="t", GIT_AUTHOR_EMAIL="t@t", GIT_COMMITTER_NAME="t",
+               GIT_COMMITTER_EMAIL="t@t")
+    if date:
+        env.update(GIT_AUTHOR_DATE=date, GIT_COMMITTER_DATE=date)
+    return subprocess.run(["git", "-C", str(repo), *args], env=env, check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
+@pytest.fixture
+def repo(tmp_path):
+    try:
+        _git(tmp_path, "init", "-q")
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("git is not available")
+    write(tmp_path / "apps" / "hoi" / "run.py", "v = 1\n")
+    write(tmp_path / "docs" / "hoi_results.json", {"summary": {"volsmpl": {"iter_ms": 1.0}}})  # no commit recorded
+    _git(tmp_path, "add", ".")
+    _git(tmp_path, "commit", "-q", "-m", "first", date="2026-01-01T00:00:00+00:00")
+    first = _git(tmp_path, "rev-parse", "--short", "HEAD")
+    write(tmp_path / "apps" / "hoi" / "run.py", "v = 2\n")
+    _git(tmp_path, "commit", "-q", "-am", "change the producer", date="2026-01-02T00:00:00+00:00")
+    second = _git(tmp_path, "rev-parse", "--short", "HEAD")
+    return tmp_path, first, second
+
+
+def _verdict(root: Path, data: dict | None = None) -> tuple[str, str]:
+    over = {"hoi": write(root / "x" / "r.json", data)} if data is not None else {}
+    text, status = report.build_report(root / "r.md", root=root, overrides=over)
+    line = next(ln for ln in text.splitlines() if ln.startswith("| `hoi` |"))
+    return ("stale" if "hoi" in status["stale"] else "unknown" if "hoi" in status["unknown"] else "current"), line
+
+
+def test_stale_when_the_producer_changed_after_the_recorded_commit(repo):
+    root, first, second = repo
+    verdict, line = _verdict(root, {"summary": {}, "meta": {"git_commit": first}})
+    assert verdict == "stale" and "**stale**" in line and second in line and "change the producer" in line
+    verdict, line = _verdict(root, {"summary": {}, "meta": {"git_commit": second}})
+    assert verdict == "current" and "**current**" in line
+    # a recorded date (no commit) before / after the producer's last change
+    assert _verdict(root, {"summary": {}, "date": "2026-01-01T12:00:00+00:00"})[0] == "stale"
+    assert _verdict(root, {"summary": {}, "date": "2026-01-03T00:00:00+00:00"})[0] == "current"
+    # nothing recorded: the commit that last touched the committed JSON (the first one) predates the change
+    verdict, line = _verdict(root)
+    assert verdict == "stale" and f"committed in {first}" in line
+
+
+def test_git_unavailable_is_said_not_guessed(tmp_path):
+    write(tmp_path / "docs" / "hoi_results.json", HOI)
+    text, status = report.build_report(tmp_path / "r.md", root=tmp_path, git=report.Git(tmp_path / "nowhere"))
+    assert status["unknown"] == ["hoi"] and status["stale"] == []
+    assert "**unknown**: not checked: git unavailable (" in text
+
+
+def test_cli_user_errors_one_line_exit_2(tmp_path, capsys):
+    out = tmp_path / "r.md"
+    assert main(["report", "--results", f"hoi={tmp_path / 'missing.json'}", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "file not found" in err and err.startswith("volsmpl report: error:")
+    bad = write(tmp_path / "bad.json", "{not json")
+    assert main(["report", "--results", f"egohmr={bad}", "--out", str(out)]) == 2
+    assert "cannot read result JSON" in capsys.readouterr().err
+    assert main(["report", "--results", f"nosuch={bad}", "--out", str(out)]) == 2
+    assert "unknown result name" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_check_exit_code_and_atomic_write(tmp_path, monkeypatch):
+    monkeypatch.setattr(report, "ROOT", tmp_path)  # an empty checkout: every result missing
+    out = tmp_path / "docs" / "report.md"
+    assert main(["report", "--out", str(out)]) == 0 and out.read_text().startswith("# Results report")
+    assert main(["report", "--out", str(out), "--check"]) == 1
+    assert [p.name for p in out.parent.iterdir()] == ["report.md"]  # no temporary file left behind
+    one = {"hoi": report.SECTIONS["hoi"]}
+    monkeypatch.setattr(report, "SECTIONS", one)
+    res = write(tmp_path / "h.json", HOI)
+    assert main(["report", "--out", str(out), "--check", "--results", f"hoi={res}"]) == 0  # no git: not stale
+
+
+def test_real_results_render_if_present():
+    docs = report.ROOT / "docs"
+    if not (docs / "bench_cpu.json").exists():
+        pytest.skip("no result JSONs in this checkout")
+    text, status = report.build_report(docs / "report.md", git=NoGit())
+    for sec in report.SECTIONS.values():
+        assert sec.title in text
+    assert "Paper Table C.4" in text and "464.41" in text and "Paper Table 6" in text
+
+
+def test_a_result_of_another_layout_does_not_stop_the_report(tmp_path):
+    res = write(tmp_path / "e.json", {"metrics": [1, 2], "config": "x"})
+    text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"eval_volsmpl": res}, git=NoGit())
+    assert "Could not tabulate these results (AttributeError" in text and "| `eval_volsmpl` |" in text
