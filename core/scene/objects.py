@@ -1,0 +1,512 @@
+"""Procedural object templates with real-world sizes, for human-object interaction and furnished rooms.
+
+Every template is built from trimesh primitives (boxes, cylinders, solids of revolution, tori, cones); no asset is
+downloaded. The geometry is this project's own procedural work, released with it under Apache-2.0.
+
+Conventions (the project's): metres, Y up, right-handed. The canonical frame of a template:
+
+- it rests on the floor: its lowest point is at y = 0; its bounding box is centred in x and z;
+- its "front" faces +Z: the side a person sits down from (chair, stool, sofa, bed foot end), the open side of a
+  shelf, the screen of a laptop, the nose of a skateboard, the side a cart is pushed towards (its handle is at -Z);
+  a cup's handle points to +X; a phone lies screen up with its top edge towards -Z;
+- long hand-held things stand upright: the bat on its barrel end (handle up), the bottle on its base, the open
+  umbrella on its handle end.
+
+Meshes: one `trimesh.Trimesh` per template, the concatenation of closed components (each watertight and wound
+outward, positive volume; vertices are not merged between components, so the whole mesh is watertight too).
+Components touch at their joints; a few interpenetrate by millimetres (cup handle in the wall, cart and umbrella
+joints): for inside/outside use winding numbers (`volsmpl.groundtruth.mesh_sdf(sign='winding')`), which count the
+union as inside, rather than ray parity.
+
+Sizes: `SIZE_PRIOR` is a hand-made table of real-world sizes (bounding-box height/width/depth along y/x/z, in
+metres, as (mean, std)), compiled from common product dimensions (mugs, 500 ml bottles, regulation balls and bats,
+phones, standard chairs, beds and tables); it stands in for the language-model size prior of the paper's HOI
+application. `make_object(category, seed)` draws each size from a normal truncated at +-2 std (seed=None: the
+means) and builds the object to that exact bounding box.
+
+Interaction hints: `ObjectTemplate.regions` names surface regions as sorted face-index arrays ('grasp', 'handle',
+'seat', 'back', 'top', 'deck', ...; see `REGIONS`); `region_points` samples points and normals on them; `seats()`
+and `supports()` give sitting places and horizontal support rectangles in the object frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import trimesh
+
+# (mean, std) in metres. height: y extent, width: x extent, depth: z extent of the bounding box (canonical frame);
+# seat_height: top of the seat / mattress above the floor.
+SIZE_PRIOR: dict[str, dict[str, tuple[float, float]]] = {
+    "cup": {"height": (0.095, 0.008), "width": (0.120, 0.006), "depth": (0.082, 0.005)},  # mug, width with handle
+    "bottle": {"height": (0.250, 0.040), "width": (0.070, 0.007), "depth": (0.070, 0.007)},
+    "box": {"height": (0.300, 0.070), "width": (0.420, 0.080), "depth": (0.320, 0.060)},  # cardboard box
+    "ball": {"height": (0.220, 0.012), "width": (0.220, 0.012), "depth": (0.220, 0.012)},  # football/basketball
+    "bat": {"height": (0.840, 0.030), "width": (0.066, 0.003), "depth": (0.066, 0.003)},  # baseball bat
+    "phone": {"height": (0.008, 0.0008), "width": (0.072, 0.004), "depth": (0.148, 0.008)},
+    "skateboard": {"height": (0.110, 0.008), "width": (0.205, 0.008), "depth": (0.800, 0.025)},
+    "laptop": {"height": (0.220, 0.012), "width": (0.330, 0.020), "depth": (0.300, 0.015)},  # open at ~110 deg
+    "backpack": {"height": (0.460, 0.030), "width": (0.310, 0.020), "depth": (0.200, 0.025)},
+    "suitcase": {"height": (0.680, 0.060), "width": (0.440, 0.030), "depth": (0.260, 0.025)},
+    "umbrella": {"height": (0.850, 0.050), "width": (1.000, 0.080), "depth": (1.000, 0.080)},  # open
+    "chair": {"height": (0.900, 0.050), "width": (0.460, 0.030), "depth": (0.520, 0.030),
+              "seat_height": (0.450, 0.020)},
+    "stool": {"height": (0.500, 0.080), "width": (0.360, 0.030), "depth": (0.360, 0.030)},
+    "table": {"height": (0.750, 0.015), "width": (1.400, 0.220), "depth": (0.850, 0.080)},
+    "sofa": {"height": (0.850, 0.050), "width": (2.000, 0.220), "depth": (0.920, 0.050), "seat_height": (0.440, 0.025)},
+    "bed": {"height": (1.000, 0.100), "width": (1.500, 0.220), "depth": (2.080, 0.050), "seat_height": (0.550, 0.040)},
+    "shelf": {"height": (1.800, 0.200), "width": (0.800, 0.100), "depth": (0.320, 0.040)},
+    "cart": {"height": (0.950, 0.050), "width": (0.500, 0.040), "depth": (0.850, 0.070)},  # two-tier utility cart
+}
+CATEGORIES = tuple(SIZE_PRIOR)
+#: sizes drawn once and copied (round things): {category: {key: copied_from}}
+_TIED = {"ball": {"width": "height", "depth": "height"}, "bottle": {"depth": "width"}, "bat": {"depth": "width"},
+         "stool": {"depth": "width"}, "umbrella": {"depth": "width"}}
+#: objects a person picks up; the others are furniture standing on the floor
+HANDHELD = ("cup", "bottle", "box", "ball", "bat", "phone", "skateboard", "laptop", "backpack", "umbrella")
+SITTABLE = ("chair", "stool", "sofa", "bed")
+
+_Z_TO_Y = trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0])  # (x, y, z) -> (x, z, -y): Z axis to Y
+
+
+# --------------------------------------------------------------------------------------------- primitives
+def _box(lo, hi) -> trimesh.Trimesh:
+    return trimesh.creation.box(bounds=np.array([lo, hi], dtype=np.float64))
+
+
+def _cyl(radius: float, p0, p1, sections: int = 24) -> trimesh.Trimesh:
+    return trimesh.creation.cylinder(radius=radius, segment=np.array([p0, p1], dtype=np.float64), sections=sections)
+
+
+def _revolve_y(profile, sections: int = 32) -> trimesh.Trimesh:
+    """Solid of revolution about +Y of a (radius, y) profile that starts and ends on the axis."""
+    m = trimesh.creation.revolve(np.asarray(profile, dtype=np.float64), sections=sections)
+    return m.apply_transform(_Z_TO_Y)
+
+
+class _Parts:
+    """Named closed components, concatenated without merging vertices."""
+
+    def __init__(self):
+        self.names: list[str] = []
+        self.meshes: list[trimesh.Trimesh] = []
+
+    def add(self, name: str, mesh: trimesh.Trimesh) -> None:
+        if mesh.volume < 0:
+            mesh.invert()
+        self.names.append(name)
+        self.meshes.append(mesh)
+
+
+# --------------------------------------------------------------------------------------------- builders
+# Each builder gets the drawn sizes s (w: x, h: y, d: z extents, + extras) and an rng for discrete choices, and
+# adds components roughly inside [-w/2, w/2] x [0, h] x [-d/2, d/2]; make_object then snaps the box exactly.
+def _cup(p, s, rng):
+    h, R = s["height"], s["depth"] / 2
+    t, tb = 0.0045, 0.007
+    p.add("body", _revolve_y([(0, 0), (R, 0), (R, h), (R - t, h), (R - t, tb), (0, tb)]))
+    e = s["width"] - 2 * R  # handle reach
+    b = min(0.0055, e / 4)
+    a = max((e + t / 2) / 2 - b, 1.5 * b)
+    tor = trimesh.creation.torus(a, b, major_sections=24, minor_sections=10)  # in the XY plane
+    p.add("handle", tor.apply_translation([R - t / 2 + a + b, 0.5 * h, 0]))
+
+
+def _bottle(p, s, rng):
+    h, R = s["height"], s["width"] / 2
+    rn = 0.37 * R
+    p.add("body", _revolve_y([(0, 0), (R, 0), (R, 0.62 * h), (rn, 0.82 * h), (rn, 0.94 * h),
+                              (1.15 * rn, 0.94 * h), (1.15 * rn, h), (0, h)]))
+
+
+def _box_obj(p, s, rng):
+    w, h, d = s["width"], s["height"], s["depth"]
+    p.add("body", _box([-w / 2, 0, -d / 2], [w / 2, h, d / 2]))
+
+
+def _ball(p, s, rng):
+    r = s["height"] / 2
+    p.add("body", trimesh.creation.icosphere(subdivisions=3, radius=r).apply_translation([0, r, 0]))
+
+
+def _bat(p, s, rng):
+    L, rb = s["height"], s["width"] / 2
+    rh, rk = 0.0125, min(0.022, 0.9 * rb)
+    p.add("body", _revolve_y([(0, 0), (rb, 0), (rb, 0.35 * L), (rh, 0.70 * L), (rh, L - 0.012), (rk, L - 0.012),
+                              (rk, L), (0, L)], sections=24))
+
+
+def _phone(p, s, rng):
+    w, h, d = s["width"], s["height"], s["depth"]
+    p.add("body", _box([-w / 2, 0, -d / 2], [w / 2, h, d / 2]))
+
+
+def _skateboard(p, s, rng):
+    w, h, d = s["width"], s["height"], s["depth"]
+    t, rw, ww = 0.012, 0.027, 0.035
+    p.add("deck", _box([-w / 2, h - t, -d / 2], [w / 2, h, d / 2]))
+    for k, zc in enumerate((-(d / 2 - 0.17), d / 2 - 0.17)):
+        for j, sx in enumerate((-1, 1)):
+            xo, xi = sx * w / 2, sx * (w / 2 - ww)
+            p.add(f"wheel{2 * k + j}", _cyl(rw, [xi, rw, zc], [xo, rw, zc], sections=20))
+        p.add(f"axle{k}", _box([-w / 2 + ww, rw - 0.009, zc - 0.012], [w / 2 - ww, rw + 0.009, zc + 0.012]))
+        p.add(f"riser{k}", _box([-0.04, rw + 0.009, zc - 0.03], [0.04, h - t, zc + 0.03]))
+
+
+def _laptop(p, s, rng):
+    w, h, d = s["width"], s["height"], s["depth"]
+    tb, tl = 0.015, 0.007
+    th = float(np.clip(2 * np.arctan((h - tb) / d), np.radians(55), np.radians(85)))  # lid angle from horizontal
+    L = d / (1 + np.cos(th))
+    z0 = -d / 2 + L * np.cos(th)
+    p.add("base", _box([-w / 2, 0, z0], [w / 2, tb, z0 + L]))
+    lid = _box([-w / 2, 0, 0], [w / 2, L, tl])  # local (x, along the lid, screen normal)
+    u, n = np.array([0, np.sin(th), -np.cos(th)]), np.array([0, np.cos(th), np.sin(th)])
+    T = np.eye(4)
+    T[:3, 0], T[:3, 1], T[:3, 2] = [1, 0, 0], u, n
+    T[:3, 3] = np.array([0, tb, z0]) - tl * n
+    p.add("lid", lid.apply_transform(T))
+
+
+def _backpack(p, s, rng):
+    w, h, d = s["width"], s["height"], s["depth"]
+    hb, st, pd = h - 0.05, 0.02, 0.06  # body height, strap and pocket thickness
+    p.add("body", _box([-w / 2, 0, -d / 2 + st], [w / 2, hb, d / 2 - pd]))
+    p.add("pocket", _box([-0.35 * w, 0.05, d / 2 - pd], [0.35 * w, 0.5 * hb, d / 2]))
+    for k, sx in enumerate((-1, 1)):
+        x0, x1 = sorted((sx * 0.06, sx * 0.11))
+        p.add(f"strap{k}", _box([x0, 0.1 * hb, -d / 2], [x1, 0.85 * hb, -d / 2 + st]))
+        x0, x1 = sorted((sx * 0.03, sx * 0.045))
+        p.add(f"handle_post{k}", _box([x0, hb, -0.01], [x1, h - 0.012, 0.01]))
+    p.add("handle", _box([-0.045, h - 0.012, -0.01], [0.045, h, 0.01]))
+
+
+def _suitcase(p, s, rng):
+    w, h, d = s["width"], s["height"], s["depth"]
+    rw, hb = 0.025, h - 0.035
+    p.add("body", _box([-w / 2, 2 * rw, -d / 2], [w / 2, hb, d / 2]))
+    for k, (sx, sz) in enumerate(((-1, -1), (1, -1), (-1, 1), (1, 1))):
+        x, z = sx * (w / 2 - 0.04), sz * (d / 2 - 0.04)
+        p.add(f"wheel{k}", _cyl(rw, [x - 0.01, rw, z], [x + 0.01, rw, z], sections=16))
+    zc = -d / 2 + 0.03
+    for k, sx in enumerate((-1, 1)):
+        x0, x1 = sorted((sx * 0.12, sx * 0.135))
+        p.add(f"handle_post{k}", _box([x0, hb, zc - 0.0075], [x1, h - 0.012, zc + 0.0075]))
+    p.add("handle", _box([-0.135, h - 0.012, zc - 0.012], [0.135, h, zc + 0.012]))
+
+
+def _umbrella(p, s, rng):
+    h, R = s["height"], s["width"] / 2
+    ch, tip = 0.25, 0.03
+    p.add("handle", _cyl(0.014, [0, 0, 0], [0, 0.12, 0], sections=16))
+    p.add("shaft", _cyl(0.006, [0, 0.12, 0], [0, h - tip - ch, 0], sections=12))
+    canopy = trimesh.creation.cone(R, ch, sections=32).apply_transform(_Z_TO_Y)
+    p.add("canopy", canopy.apply_translation([0, h - tip - ch, 0]))
+    p.add("tip", _cyl(0.004, [0, h - tip - 0.01, 0], [0, h, 0], sections=12))
+
+
+def _chair(p, s, rng):
+    w, h, d, sh = s["width"], s["height"], s["depth"], s["seat_height"]
+    t, a = 0.04, 0.04  # seat thickness, leg side
+    for k, sx in enumerate((-1, 1)):
+        x0, x1 = sorted((sx * (w / 2 - a), sx * w / 2))
+        p.add(f"leg_front{k}", _box([x0, 0, d / 2 - a], [x1, sh - t, d / 2]))
+        p.add(f"leg_back{k}", _box([x0, 0, -d / 2], [x1, h, -d / 2 + a]))  # continues up as the back post
+    p.add("seat", _box([-w / 2, sh - t, -d / 2 + a], [w / 2, sh, d / 2]))
+    lo = sh + (0.10 if rng.random() < 0.5 else 0.25 * (h - sh))  # full or upper back panel
+    p.add("back", _box([-w / 2 + a, lo, -d / 2 + 0.01], [w / 2 - a, h - 0.01, -d / 2 + 0.03]))
+
+
+def _stool(p, s, rng):
+    h, R = s["height"], s["width"] / 2
+    t = 0.035
+    p.add("seat", _cyl(R, [0, h - t, 0], [0, h, 0], sections=32))
+    n = 3 if rng.random() < 0.4 else 4
+    for k in range(n):
+        ang = 2 * np.pi * k / n + np.pi / 4
+        c = 0.62 * R * np.array([np.cos(ang), 0, np.sin(ang)])
+        p.add(f"leg{k}", _cyl(0.016, c, c + [0, h - t, 0], sections=12))
+
+
+def _table(p, s, rng):
+    w, h, d = s["width"], s["height"], s["depth"]
+    t, a, inset = 0.03, 0.05, 0.03 + 0.05 * rng.random()
+    p.add("top", _box([-w / 2, h - t, -d / 2], [w / 2, h, d / 2]))
+    for k, (sx, sz) in enumerate(((-1, -1), (1, -1), (-1, 1), (1, 1))):
+        x0, x1 = sorted((sx * (w / 2 - inset), sx * (w / 2 - inset - a)))
+        z0, z1 = sorted((sz * (d / 2 - inset), sz * (d / 2 - inset - a)))
+        p.add(f"leg{k}", _box([x0, 0, z0], [x1, h - t, z1]))
+
+
+def _sofa(p, s, rng):
+    w, h, d, sh = s["width"], s["height"], s["depth"], s["seat_height"]
+    lh, aw, bd = 0.08, 0.14 + 0.06 * rng.random(), 0.20
+    ah = min(sh + 0.18 + 0.06 * rng.random(), h - 0.05)
+    for k, sx in enumerate((-1, 1)):
+        x0, x1 = sorted((sx * (w / 2 - aw), sx * w / 2))
+        p.add(f"arm{k}", _box([x0, lh, -d / 2], [x1, ah, d / 2]))
+        for j, sz in enumerate((-1, 1)):
+            lx0, lx1 = sorted((sx * (w / 2 - 0.10), sx * (w / 2 - 0.05)))
+            lz0, lz1 = sorted((sz * (d / 2 - 0.10), sz * (d / 2 - 0.05)))
+            p.add(f"leg{2 * k + j}", _box([lx0, 0, lz0], [lx1, lh, lz1]))
+    p.add("back_base", _box([-w / 2 + aw, lh, -d / 2], [w / 2 - aw, sh, -d / 2 + bd]))
+    p.add("back", _box([-w / 2 + aw, sh, -d / 2], [w / 2 - aw, h, -d / 2 + bd]))
+    p.add("seat", _box([-w / 2 + aw, lh, -d / 2 + bd], [w / 2 - aw, sh, d / 2]))
+
+
+def _bed(p, s, rng):
+    w, h, d, sh = s["width"], s["height"], s["depth"], s["seat_height"]
+    hb, mt = 0.05, 0.20  # headboard and mattress thickness
+    p.add("headboard", _box([-w / 2, 0, -d / 2], [w / 2, h, -d / 2 + hb]))
+    p.add("frame", _box([-w / 2, 0, -d / 2 + hb], [w / 2, sh - mt, d / 2]))
+    p.add("mattress", _box([-w / 2 + 0.02, sh - mt, -d / 2 + hb], [w / 2 - 0.02, sh, d / 2 - 0.02]))
+    n = 2 if w > 1.3 else 1
+    pw = (w - 0.04 - 0.1 * (n + 1)) / n
+    for k in range(n):
+        x0 = -w / 2 + 0.02 + 0.1 + k * (pw + 0.1)
+        p.add(f"pillow{k}", _box([x0, sh, -d / 2 + hb + 0.05], [x0 + pw, sh + 0.10, -d / 2 + hb + 0.45]))
+
+
+def _shelf(p, s, rng):
+    w, h, d = s["width"], s["height"], s["depth"]
+    t, bt = 0.02, 0.01
+    for k, sx in enumerate((-1, 1)):
+        x0, x1 = sorted((sx * (w / 2 - t), sx * w / 2))
+        p.add(f"side{k}", _box([x0, 0, -d / 2], [x1, h, d / 2]))
+    xi = w / 2 - t
+    p.add("back", _box([-xi, 0, -d / 2], [xi, h - t, -d / 2 + bt]))
+    p.add("bottom", _box([-xi, 0, -d / 2 + bt], [xi, 0.06, d / 2]))
+    p.add("top", _box([-xi, h - t, -d / 2], [xi, h, d / 2]))
+    n = int(rng.integers(2, 6))
+    for k, y in enumerate(np.linspace(0.06, h - t, n + 2)[1:-1]):
+        p.add(f"board{k}", _box([-xi, y - t / 2, -d / 2 + bt], [xi, y + t / 2, d / 2]))
+
+
+def _cart(p, s, rng):
+    w, h, d = s["width"], s["height"], s["depth"]
+    rw, pt, r = 0.04, 0.03, 0.012  # wheel radius, platform thickness, post radius
+    y_up = 0.62 * h + 0.1 * (h - 0.62 * h) * rng.random()
+    p.add("platform_low", _box([-w / 2, 0.10, -d / 2], [w / 2, 0.10 + pt, d / 2]))
+    p.add("platform_top", _box([-w / 2, y_up - pt, -d / 2], [w / 2, y_up, d / 2]))
+    for k, (sx, sz) in enumerate(((-1, -1), (1, -1), (-1, 1), (1, 1))):
+        x, z = sx * (w / 2 - 0.04), sz * (d / 2 - 0.06)
+        p.add(f"wheel{k}", _cyl(rw, [x - 0.015, rw, z], [x + 0.015, rw, z], sections=16))
+        p.add(f"mount{k}", _box([x - 0.015, 2 * rw, z - 0.02], [x + 0.015, 0.10, z + 0.02]))
+        xp, zp = sx * (w / 2 - 0.03), sz * (d / 2 - 0.03)
+        p.add(f"post{k}", _cyl(r, [xp, 0.10 + pt, zp], [xp, y_up - pt, zp], sections=12))
+    zh = -d / 2 + 0.03
+    for k, sx in enumerate((-1, 1)):
+        xp = sx * (w / 2 - 0.03)
+        p.add(f"handle_post{k}", _cyl(r, [xp, y_up, zh], [xp, h - 0.015, zh], sections=12))
+    p.add("handle", _cyl(0.015, [-w / 2, h - 0.015, zh], [w / 2, h - 0.015, zh], sections=16))
+
+
+_BUILDERS = {"cup": _cup, "bottle": _bottle, "box": _box_obj, "ball": _ball, "bat": _bat, "phone": _phone,
+             "skateboard": _skateboard, "laptop": _laptop, "backpack": _backpack, "suitcase": _suitcase,
+             "umbrella": _umbrella, "chair": _chair, "stool": _stool, "table": _table, "sofa": _sofa, "bed": _bed,
+             "shelf": _shelf, "cart": _cart}
+
+# --------------------------------------------------------------------------------------------- regions
+_UP, _DOWN = (0, 1, 0), (0, -1, 0)
+_X, _Z = (1, 0, 0), (0, 0, 1)
+_SIDE = "side"  # any horizontal normal
+_RADIAL = "radial"  # horizontal normal pointing away from the component's vertical axis
+#: {category: {region: [(component names, normal filter or None, (y_lo, y_hi) as fractions of height or None)]}};
+#: a component name matches 'leg' when it is 'leg' or 'leg' followed by digits ('leg0', 'leg1', ...).
+REGIONS: dict[str, dict[str, list]] = {
+    "cup": {"handle": [(("handle",), None, None)], "grasp": [(("handle",), None, None), (("body",), _RADIAL, None)],
+            "bottom": [(("body",), _DOWN, (0, 0.01))]},
+    "bottle": {"grasp": [(("body",), _RADIAL, (0.1, 0.62))], "neck": [(("body",), _RADIAL, (0.82, 0.94))],
+               "bottom": [(("body",), _DOWN, (0, 0.01))]},
+    "box": {"top": [(("body",), _UP, None)], "grasp": [(("body",), _X, None), (("body",), (-1, 0, 0), None)],
+            "bottom": [(("body",), _DOWN, None)]},
+    "ball": {"grasp": [(("body",), None, None)]},
+    "bat": {"handle": [(("body",), _RADIAL, (0.70, 0.985))], "grasp": [(("body",), _RADIAL, (0.70, 0.985))],
+            "barrel": [(("body",), _RADIAL, (0.0, 0.35))]},
+    "phone": {"screen": [(("body",), _UP, None)], "back": [(("body",), _DOWN, None)],
+              "grasp": [(("body",), _X, None), (("body",), (-1, 0, 0), None)]},
+    "skateboard": {"deck": [(("deck",), _UP, None)], "grasp": [(("deck",), _X, None), (("deck",), (-1, 0, 0), None)],
+                   "wheels": [(("wheel",), None, None)]},
+    "laptop": {"keyboard": [(("base",), _UP, None)], "screen": [(("lid",), "lid_front", None)],
+               "grasp": [(("base",), _X, None), (("base",), (-1, 0, 0), None), (("base",), _Z, None)]},
+    "backpack": {"handle": [(("handle",), None, None)], "straps": [(("strap",), None, None)],
+                 "grasp": [(("handle",), None, None)]},
+    "suitcase": {"handle": [(("handle",), None, None)], "grasp": [(("handle",), None, None)],
+                 "top": [(("body",), _UP, None)]},
+    "umbrella": {"handle": [(("handle",), _SIDE, None)], "grasp": [(("handle",), _SIDE, None)],
+                 "canopy": [(("canopy",), None, None)]},
+    "chair": {"seat": [(("seat",), _UP, None)], "back": [(("back",), _Z, None)],
+              "grasp": [(("back", "leg_back"), _UP, (0.9, 1.01))]},
+    "stool": {"seat": [(("seat",), _UP, None)], "grasp": [(("seat",), _RADIAL, None)]},
+    "table": {"top": [(("top",), _UP, None)], "grasp": [(("top",), _SIDE, None)]},
+    "sofa": {"seat": [(("seat",), _UP, None)], "back": [(("back",), _Z, None)], "armrest": [(("arm",), _UP, None)]},
+    "bed": {"seat": [(("mattress",), _UP, None)], "top": [(("mattress",), _UP, None)],
+            "back": [(("headboard",), _Z, None)]},
+    "shelf": {"top": [(("top",), _UP, None)], "boards": [(("board", "bottom"), _UP, None)]},
+    "cart": {"handle": [(("handle",), None, None)], "grasp": [(("handle",), None, None)],
+             "top": [(("platform_top",), _UP, None)]},
+}
+#: regions whose upward faces are horizontal support rectangles (see ObjectTemplate.supports)
+SUPPORT_REGIONS = ("top", "boards", "seat", "deck", "keyboard")
+
+
+def _select_faces(mesh: trimesh.Trimesh, comp: np.ndarray, names: list[str], specs, height: float) -> np.ndarray:
+    normals, centres = mesh.face_normals, mesh.triangles_center
+    keep = np.zeros(len(mesh.faces), bool)
+    for prefixes, normal, yr in specs:
+        ids = [i for i, n in enumerate(names)
+               if any(n == q or n.startswith(q) and n[len(q):].isdigit() for q in prefixes)]
+        m = np.isin(comp, ids)
+        if normal == _SIDE:
+            m &= np.abs(normals[:, 1]) < 0.3
+        elif normal == _RADIAL:
+            axis = np.zeros((len(m), 3))
+            for i in ids:  # each component's own vertical axis through its bbox centre
+                sel = comp == i
+                axis[sel] = mesh.vertices[mesh.faces[sel]].reshape(-1, 3).mean(0)
+            r = (centres - axis)[:, [0, 2]]
+            m &= (np.abs(normals[:, 1]) < 0.95) & (np.einsum("ij,ij->i", r, normals[:, [0, 2]]) > 0)
+        elif normal == "lid_front":
+            m &= (normals[:, 2] > 0.3) & (normals[:, 1] > 0)
+        elif normal is not None:
+            m &= normals @ np.asarray(normal, dtype=np.float64) > 0.9
+        if yr is not None:
+            m &= (centres[:, 1] >= yr[0] * height) & (centres[:, 1] <= yr[1] * height)
+        keep |= m
+    return np.flatnonzero(keep)
+
+
+# --------------------------------------------------------------------------------------------- template
+@dataclass
+class ObjectTemplate:
+    """One generated object in its canonical frame (see the module docstring).
+
+    Attributes:
+        category: one of CATEGORIES.
+        mesh: the closed, outward-wound triangle mesh (metres; vertices not merged between components).
+        sizes: the drawn sizes {'height', 'width', 'depth', ...} in metres; the mesh's bounding box is
+            exactly (width, height, depth) along (x, y, z) times `scale`.
+        regions: {name: sorted face indices} of named interaction regions (REGIONS lists them per category).
+        component: (F,) component id per face; component_names: the components' names.
+        seed: the seed it was drawn with (None: mean sizes).
+    """
+
+    category: str
+    mesh: trimesh.Trimesh
+    sizes: dict[str, float]
+    regions: dict[str, np.ndarray]
+    component: np.ndarray
+    component_names: tuple[str, ...]
+    seed: int | None = None
+    scale: np.ndarray = field(default_factory=lambda: np.ones(3))
+
+    @property
+    def extents(self) -> np.ndarray:
+        """(3,) bounding-box size along x, y, z in metres."""
+        return self.mesh.bounds[1] - self.mesh.bounds[0]
+
+    def region_points(self, name: str, n: int = 256, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+        """Area-uniform points and outward normals on a named region.
+
+        Shape: -> points (n, 3), normals (n, 3), canonical frame.
+
+        Example:
+            >>> pts, nrm = make_object("chair").region_points("seat", 100)
+        """
+        if name not in self.regions:
+            raise ValueError(f"{self.category} has no region {name!r}; it has {sorted(self.regions)}.")
+        from .points import sample_surface
+        return sample_surface(self.mesh, n, seed=seed, faces=self.regions[name])
+
+    def _region_box(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        v = self.mesh.vertices[self.mesh.faces[self.regions[name]]].reshape(-1, 3)
+        return v.min(0), v.max(0)
+
+    def seats(self) -> list[dict]:
+        """Places to sit in the canonical frame: dicts with 'position' (3,) on the seat surface (where the
+        pelvis goes), 'height' (m above the floor) and 'facing' (3,) unit (the direction a sitter looks, +Z).
+        Sofas give one place per 0.6 m of seat width; beds give places along the foot end. Empty if not sittable."""
+        if "seat" not in self.regions:
+            return []
+        lo, hi = self._region_box("seat")
+        width = hi[0] - lo[0]
+        k = max(1, int(width // 0.6)) if self.category in ("sofa", "bed") else 1
+        xs = lo[0] + width * (np.arange(k) + 0.5) / k
+        z = hi[2] - 0.3 if self.category == "bed" else 0.5 * (lo[2] + hi[2])
+        return [{"position": np.array([x, hi[1], z]), "height": float(hi[1]), "facing": np.array([0.0, 0.0, 1.0])}
+                for x in xs]
+
+    def supports(self) -> list[dict]:
+        """Horizontal support rectangles (things can stand on them) in the canonical frame: dicts with 'name'
+        (the region), 'center' (3,), 'half_size' (2,) along x and z, 'height'. One per upward component face
+        of the regions in SUPPORT_REGIONS (e.g. each shelf board)."""
+        out = []
+        for name in SUPPORT_REGIONS:
+            if name not in self.regions or name == "seat" and self.category == "bed":
+                continue
+            faces = self.regions[name]
+            for c in np.unique(self.component[faces]):
+                v = self.mesh.vertices[self.mesh.faces[faces[self.component[faces] == c]]].reshape(-1, 3)
+                lo, hi = v.min(0), v.max(0)
+                out.append({"name": name, "center": 0.5 * (lo + hi), "half_size": 0.5 * (hi - lo)[[0, 2]],
+                            "height": float(hi[1])})
+        return out
+
+
+def _draw_sizes(category: str, rng: np.random.Generator | None) -> dict[str, float]:
+    sizes = {}
+    for key, (mean, std) in SIZE_PRIOR[category].items():
+        z = 0.0 if rng is None else float(np.clip(rng.standard_normal(), -2.0, 2.0))
+        sizes[key] = mean + std * z
+    for key, src in _TIED.get(category, {}).items():
+        sizes[key] = sizes[src]
+    return sizes
+
+
+def make_object(category: str, seed: int | None = None, scale=None) -> ObjectTemplate:
+    """Build an object template of a category with realistic, seed-varied proportions.
+
+    Args:
+        category: one of CATEGORIES.
+        seed: None gives the mean sizes of SIZE_PRIOR (and default discrete choices); an int draws each size from
+            its prior truncated at +-2 std, and the discrete choices (number of shelf boards, stool legs...);
+            the same seed gives byte-identical vertices.
+        scale: None, a positive float, or positive (sx, sy, sz) applied after building (e.g. a low coffee table:
+            make_object('table', scale=(0.8, 0.6, 0.7))).
+
+    Returns:
+        an ObjectTemplate; its mesh's bounding box is exactly (width, height, depth) * scale, resting on y = 0
+        and centred in x and z.
+
+    Shape: mesh (V, 3) vertices, (F, 3) faces.
+
+    Example:
+        >>> chair = make_object("chair", seed=3)
+        >>> chair.mesh.is_watertight, chair.seats()[0]["height"]
+    """
+    if category not in _BUILDERS:
+        raise ValueError(f"unknown object category {category!r}; known: {', '.join(CATEGORIES)}.")
+    if seed is not None and (not isinstance(seed, (int, np.integer)) or seed < 0):
+        raise ValueError(f"seed must be None or a non-negative int, got {seed!r}.")
+    sc = np.ones(3) if scale is None else np.broadcast_to(np.asarray(scale, dtype=np.float64), (3,)).copy()
+    if not (np.isfinite(sc).all() and (sc > 0).all()):
+        raise ValueError(f"scale must be a positive float or three positive floats, got {scale!r}.")
+    rng = None if seed is None else np.random.default_rng([int(seed), CATEGORIES.index(category)])
+    sizes = _draw_sizes(category, rng)
+    parts = _Parts()
+    _BUILDERS[category](parts, sizes, rng if rng is not None else np.random.default_rng(0))
+    counts = [len(m.faces) for m in parts.meshes]
+    offsets = np.cumsum([0] + [len(m.vertices) for m in parts.meshes])
+    v = np.concatenate([m.vertices for m in parts.meshes])
+    f = np.concatenate([m.faces + o for m, o in zip(parts.meshes, offsets[:-1])])
+    comp = np.repeat(np.arange(len(counts)), counts)
+    # snap the bounding box exactly to the drawn sizes (tessellation leaves it off by < 2%), then apply scale
+    lo, hi = v.min(0), v.max(0)
+    target = np.array([sizes["width"], sizes["height"], sizes["depth"]])
+    v = (v - 0.5 * (lo + hi)) * (target / (hi - lo)) * sc
+    v[:, 1] += 0.5 * target[1] * sc[1]
+    mesh = trimesh.Trimesh(v, f, process=False)
+    names = tuple(parts.names)
+    regions = {name: _select_faces(mesh, comp, list(names), specs, target[1] * sc[1])
+               for name, specs in REGIONS[category].items()}
+    return ObjectTemplate(category, mesh, sizes, regions, comp, names, seed, sc)
