@@ -21,13 +21,13 @@ import datetime as _dt
 import json
 import os
 import subprocess
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from volsmpl import paper as _paper
 from volsmpl import report_sections as rs
+from volsmpl.outputs import check_writable, write_atomic
 
 _HERE = Path(__file__).resolve().parent.parent
 #: the repository root of the source checkout (core/ -> root); else (an installed package) the working directory
@@ -77,7 +77,7 @@ SECTIONS: dict[str, Section] = {
         {"selfpen": ("docs/selfpen_cpu.json", "out/selfpen/results.json"),
          "selfpen_seeds": "docs/selfpen_cpu_seeds.json",
          "selfpen_tune": "docs/selfpen_tune.json"},
-        {"selfpen": "volsmpl selfpen --model volsmpl,coap --out out/selfpen && "
+        {"selfpen": "volsmpl selfpen --model volsmpl,coap,mesh --out out/selfpen && "
                     "cp out/selfpen/results.json docs/selfpen_cpu.json",
          "selfpen_seeds": "for S in 0 1 2 3; do volsmpl selfpen --model volsmpl,coap --seed $S --out out/selfpen_s$S; "
                           "done  # means over the seeds: docs/selfpen_cpu_seeds.json",
@@ -337,20 +337,6 @@ def _checkpoint_note(sec: Section, prov: dict, path: Path, git: Git) -> str:
     return f"; the shipped {', '.join(later)} changed after it: it describes an earlier checkpoint" if later else ""
 
 
-def write_atomic(path: Path, text: str) -> None:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 # -------------------------------------------------------------------------------------------------------------- CLI
 
 def add_parser(sub):
@@ -367,6 +353,7 @@ def add_parser(sub):
 def run(args) -> int:
     overrides = parse_overrides(args.results)
     out = Path(args.out) if args.out else ROOT / "docs" / "report.md"
+    check_writable(out, "file", "--out")
     text, status = build_report(out, ROOT, overrides)
     write_atomic(out, text)
     print(f"wrote {out}: " + "; ".join(f"{k}: {', '.join(v) or 'none'}" for k, v in status.items()))
