@@ -10,6 +10,23 @@ from .models import kind_of_config, model_kind
 from .partition import Partition
 
 
+#: the buffers attach_volume reads of a body module (volsmpl.Body and smplx SMPL/SMPL-H/SMPL-X have them all)
+BODY_ATTRIBUTES = ("v_template", "faces", "lbs_weights", "parents", "J_regressor", "shapedirs")
+
+
+def _check_body(body) -> None:
+    """TypeError in one line unless `body` is a body module (volsmpl.Body or smplx SMPL/SMPL-H/SMPL-X)."""
+    import torch
+
+    missing = [a for a in BODY_ATTRIBUTES if not hasattr(body, a)]
+    if not isinstance(body, torch.nn.Module) or missing:
+        detail = f" (it lacks {', '.join(missing)})" if isinstance(body, torch.nn.Module) and missing else ""
+        hint = ("; call attach_volume on the body module itself, e.g. attach_volume(volsmpl.create_body()), "
+                "not on its output" if hasattr(body, "vertices") else "; e.g. attach_volume(volsmpl.create_body())")
+        raise TypeError(f"attach_volume: expected a volsmpl.Body or an smplx SMPL/SMPL-H/SMPL-X model, got "
+                        f"{type(body).__name__}{detail}{hint}.")
+
+
 def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool = True, model: str = "volsmpl",
                   config=None, dense: bool = False):
     """Attach a volumetric model as `body.volume` (and return it).
@@ -27,6 +44,7 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
         >>> body = volsmpl.create_body()
         >>> volume = attach_volume(body, model="mesh")
     """
+    _check_body(body)
     kind = model_kind(model)
     fp = fingerprint_of_model(body)
     if not kind.learned:

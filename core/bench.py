@@ -368,12 +368,17 @@ def config_from_args(args) -> BenchConfig:
 
 
 def _write(path: str, text: str) -> None:
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text(text)
+    from .outputs import write_atomic
+    write_atomic(path, text)
     print(f"wrote {path}")
 
 
 def run(args) -> int:
+    from .outputs import check_writable
+    if args.out:  # before the benchmark: a bad path fails in seconds, not after it
+        check_writable(args.out, "file", "--out")
+    if args.markdown:
+        check_writable(args.markdown, "file", "--markdown")
     cfg = config_from_args(args)
     result = run_bench(cfg, log=lambda s: print(s, file=sys.stderr, flush=True))
     print(format_report(result))

@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import traceback
 
 # subcommand name -> (module providing add_parser(subparsers) and run(args), one-line summary for --help)
 SUBCOMMANDS = {
@@ -25,6 +27,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser with the full options of `command` (every subcommand when None) and one-line entries
     for the others."""
     parser = argparse.ArgumentParser(prog="volsmpl", description="VolumetricSMPL: neural volumetric human body model")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback of an error (also: environment variable VOLSMPL_DEBUG=1)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="{" + ",".join(SUBCOMMANDS) + "}")
     for name, (module, summary) in SUBCOMMANDS.items():
         if command is None or name == command:
@@ -35,15 +39,50 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+#: exceptions a user can cause (bad arguments, inputs, paths, environment): exit 2, the message is the fix
+USER_ERRORS = (ValueError, TypeError, OSError, RuntimeError)
+
+
+def _one_line(e: BaseException) -> str:
+    msg = " ".join(str(e).split())
+    return msg or type(e).__name__
+
+
+def _debug_env() -> bool:
+    return os.environ.get("VOLSMPL_DEBUG", "").strip().lower() not in ("", "0", "false", "no", "off")
+
+
 def main(argv=None) -> int:
+    """Run `volsmpl ARGV`; return the exit code. Every exception of a subcommand ends as one line on stderr,
+    `volsmpl <cmd>: error: <message>`: exit 2 for user errors (USER_ERRORS), 1 for unexpected internal errors,
+    130 for Ctrl-C. The traceback is printed only with --debug (anywhere on the line) or VOLSMPL_DEBUG=1."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    cut = argv.index("--") if "--" in argv else len(argv)
+    debug = "--debug" in argv[:cut] or _debug_env()
+    argv = [a for i, a in enumerate(argv) if not (a == "--debug" and i < cut)]
     command = next((a for a in argv if not a.startswith("-")), None)
-    args = build_parser(command if command in SUBCOMMANDS else "").parse_args(argv)
+    name = command if command in SUBCOMMANDS else "?"
     try:
+        args = build_parser(command if command in SUBCOMMANDS else "").parse_args(argv)
         return int(args._run(args) or 0)
-    except (ValueError, FileNotFoundError, RuntimeError) as e:  # user errors: one clear line, no traceback
-        print(f"volsmpl {args.command}: error: {e}", file=sys.stderr)
+    except SystemExit:  # argparse (usage line + error, exit 2; --help exit 0) and explicit exits
+        raise
+    except KeyboardInterrupt:
+        if debug:
+            traceback.print_exc()
+        print(f"volsmpl {name}: interrupted", file=sys.stderr)
+        return 130
+    except USER_ERRORS as e:  # user errors: one clear line, no traceback
+        if debug:
+            traceback.print_exc()
+        print(f"volsmpl {name}: error: {_one_line(e)}", file=sys.stderr)
         return 2
+    except Exception as e:  # a bug: still one line, the traceback on request
+        if debug:
+            traceback.print_exc()
+        print(f"volsmpl {name}: error: internal error: {type(e).__name__}: {_one_line(e)} "
+              f"(rerun with --debug or VOLSMPL_DEBUG=1 to see the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -25,9 +25,10 @@ def run(args) -> int:
     from .body.model import create_body
     from .body.poses import named_pose
     from .partition import Partition
+    from .outputs import check_writable
     from .render import grid, part_palette, render_mesh, save_png
 
-    out_dir = Path(args.out)
+    out_dir = check_writable(args.out, "dir", "--out")
     (out_dir / "poses").mkdir(parents=True, exist_ok=True)
     body = create_body()
     part = Partition(body)

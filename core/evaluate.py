@@ -391,6 +391,9 @@ def add_parser(sub):
 
 
 def run(args) -> int:
+    from .outputs import check_writable, write_atomic
+    if args.out:  # before the evaluation: a bad path fails in seconds, not after it
+        check_writable(args.out, "file", "--out")
     if args.checkpoint is not None and args.random_init:
         raise ValueError("--checkpoint and --random-init exclude each other; give one.")
     if args.threads is not None:
@@ -410,8 +413,6 @@ def run(args) -> int:
               f"({res.resources['threads']} threads), median of {cfg.timing_repeats}; t = encoding + query, "
               f"t query = query only; mem = {res.resources['mem_kind']}")
     if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        with open(args.out, "w") as fh:
-            json.dump(res.to_dict(), fh, indent=1)
+        write_atomic(args.out, json.dumps(res.to_dict(), indent=1))
         print(f"wrote {args.out}")
     return 0

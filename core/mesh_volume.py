@@ -111,5 +111,8 @@ class MeshVolume(BodyVolume):
     def extract_mesh(self, out, resolution: int = 128, body_index: int = 0, padding: float = 0.05):
         """The posed mesh itself (the exact zero level set) of one body, as a trimesh.Trimesh."""
         import trimesh
+
+        from .extract_args import check_extract_args
+        _, body_index, _ = check_extract_args(out, resolution, body_index, padding)  # same contract as Volume's
         return trimesh.Trimesh(out.vertices[body_index].detach().cpu().numpy(), self.partition.faces.cpu().numpy(),
                                process=False)

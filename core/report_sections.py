@@ -9,7 +9,7 @@ Provenance, staleness, figures and missing results are written around the builde
 """
 from __future__ import annotations
 
-from volsmpl import paper as _paper
+from volsmpl import paper as paper_tables
 
 MIB = 2.0 ** 20
 
@@ -61,7 +61,7 @@ def _is_num(v) -> bool:
 
 
 def paper_caption(tid: str) -> str:
-    t = _paper.TABLES[tid]
+    t = paper_tables.TABLES[tid]
     return f"Paper Table {tid}: {t['title'].rstrip('.')}; hardware: {t['hardware']}."
 
 
@@ -73,7 +73,7 @@ def summary_table(tid: str, groups: list[tuple[str, str, dict]], key_map: dict |
     group's first row. key_map: paper column -> our metric key where they differ. extra: more of our metric keys
     as columns (default: every numeric key of the summaries that no paper column reads). paper_rows: the paper rows
     to print (default: every row; the ones matching no group go last)."""
-    t = _paper.TABLES[tid]
+    t = paper_tables.TABLES[tid]
     key_map = key_map or {}
     cols = list(t["columns"])
     read = {key_map.get(c, c) for c in cols}
@@ -107,7 +107,7 @@ def summary_table(tid: str, groups: list[tuple[str, str, dict]], key_map: dict |
 
 def paper_mismatch(data: dict, tid: str) -> list[str]:
     """Lines naming the numbers where a result's own `paper` dict disagrees with volsmpl.paper."""
-    own, t = data.get("paper"), _paper.TABLES[tid]
+    own, t = data.get("paper"), paper_tables.TABLES[tid]
     if not isinstance(own, dict):
         return []
     bad = [f"{r}.{c}: {own[r][c]} (paper: {t['rows'][r][c]})" for r in t["rows"] if isinstance(own.get(r), dict)
@@ -128,7 +128,7 @@ def n_cases(data: dict) -> int | None:
 
 def eval_section(ctx) -> list[str]:
     """Table 1 accuracy from `volsmpl eval` JSONs (results 'eval_volsmpl', 'eval_coap')."""
-    t = _paper.TABLES["1"]
+    t = paper_tables.TABLES["1"]
     cols = [("iou_mean", 100), ("iou_surf", 100), ("iou_unif", 100), ("mse_sdf", 1), ("mse_abs_sdf", 1)]
     header = ["row", "IoU mean [%]", "IoU surf. [%]", "IoU unif. [%]", "MSE SDF [m^2]", "MSE abs SDF [m^2]",
               "MSE SDF near surface [m^2]"]
@@ -156,7 +156,7 @@ _BENCH_LABELS = {"volsmpl": "VolumetricSMPL (sparse)", "volsmpl-dense": "Volumet
 def bench_section(ctx) -> list[str]:
     """Table 1 resources and Table C.4 from `volsmpl bench` (result 'bench')."""
     d = ctx["results"].get("bench") or {}
-    t1, c4 = _paper.TABLES["1"]["rows"], _paper.TABLES["C.4"]["rows"]
+    t1, c4 = paper_tables.TABLES["1"]["rows"], paper_tables.TABLES["C.4"]["rows"]
     rows, skipped = [], []
     for m, r in (d.get("models") or {}).items():
         for b, x in sorted((r.get("batches") or {}).items(), key=lambda kv: int(kv[0])):
@@ -168,7 +168,7 @@ def bench_section(ctx) -> list[str]:
         if r.get("status") not in (None, "ok"):
             skipped.append(f"- {m}: {r.get('status')} {r.get('error', '')}".rstrip())
     for k in ("volsmpl", "coap"):
-        rows.append([f"paper: {_paper.TABLES['1']['row_labels'][k]}", "not stated", fmt_paper(t1[k]["t_ms"]), "-",
+        rows.append([f"paper: {paper_tables.TABLES['1']['row_labels'][k]}", "not stated", fmt_paper(t1[k]["t_ms"]), "-",
                      f"{fmt_paper(t1[k]['gpu_gb'])} GB", "-", "GPU memory"])
     out = [paper_caption("1") + " Time and memory of 60k query points.", ""]
     out += md_table(["row", "B", "t [ms]", "t query [ms]", "memory", "params [M]", "memory kind"], rows)
@@ -242,7 +242,7 @@ def summary_section(ctx) -> list[str]:
     assign = {tid: [] for tid in tids}
     for backend, s in summary.items():
         if isinstance(s, dict):
-            tid = next((t for t in tids if backend in _paper.TABLES[t]["rows"]), tids[0])
+            tid = next((t for t in tids if backend in paper_tables.TABLES[t]["rows"]), tids[0])
             assign[tid].append((backend, backend, s))
     out = []
     for tid in tids:

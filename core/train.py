@@ -61,14 +61,15 @@ from types import SimpleNamespace
 import torch
 import torch.distributed as dist
 
+from .attach import attach_volume
 from .body.model import create_body
 from .body.poses import check_pose_mode, sample_poses
 from .body.shapes import sample_betas
 from .checkpoint import load_checkpoint, save_checkpoint
-from .groundtruth import SIGN_MODES, batch_mesh_sdf, sample_training_queries
+from .groundtruth import SIGN_MODES, batch_mesh_sdf
 from .models import learned_models, model_kind
 from .nn.config import VolumeConfig
-from .attach import attach_volume
+from .training_queries import sample_training_queries
 
 
 @dataclass
@@ -539,6 +540,8 @@ def add_parser(sub):
 
 
 def run(args) -> int:
+    from .outputs import check_writable
+    check_writable(args.out, "dir", "--out")  # before any work: a bad run folder fails in seconds
     d = {}
     if args.config:
         d = json.loads(Path(args.config).read_text())

@@ -395,8 +395,8 @@ class Volume(BodyVolume):
         import trimesh
         from skimage.measure import marching_cubes
 
-        if resolution < 8:
-            raise ValueError(f"resolution={resolution} is too coarse; use at least 8 (128 recommended).")
+        from .extract_args import check_extract_args
+        resolution, body_index, padding = check_extract_args(out, resolution, body_index, padding)
         v = out.vertices[body_index].detach()
         lo, hi = v.amin(0) - padding, v.amax(0) + padding
         axes = [torch.linspace(float(lo[i]), float(hi[i]), resolution, dtype=v.dtype, device=v.device) for i in range(3)]

@@ -7,6 +7,7 @@ import torch
 import trimesh
 
 from volsmpl import groundtruth as gt
+from volsmpl import training_queries as tq
 
 try:
     import open3d  # noqa: F401
@@ -360,7 +361,7 @@ def test_sampler_uniform_points_in_their_boxes(two_part_scene):
     from volsmpl.partition import Partition
     verts, f, G, lo, hi, parts = two_part_scene
     nu, ns = 300, 50
-    q = gt.sample_training_queries(verts, f, G, lo, hi, n_uniform=nu, n_surface=ns, face_ids_per_part=parts,
+    q = tq.sample_training_queries(verts, f, G, lo, hi, n_uniform=nu, n_surface=ns, face_ids_per_part=parts,
                                    generator=torch.Generator().manual_seed(0))
     assert q.shape == (2, 2 * (nu + ns), 3) and q.dtype == verts.dtype
     per_part = q.reshape(2, 2, nu + ns, 3)[:, :, :nu]  # (B, K, nu, 3)
@@ -379,7 +380,7 @@ def test_sampler_surface_points_on_their_part_with_sigma(two_part_scene):
     verts, f, G, lo, hi, parts = two_part_scene
     ns = 4000
     sigma = (0.01, 0.03)
-    q = gt.sample_training_queries(verts, f, G, lo, hi, n_uniform=0, n_surface=ns, sigma=sigma,
+    q = tq.sample_training_queries(verts, f, G, lo, hi, n_uniform=0, n_surface=ns, sigma=sigma,
                                    face_ids_per_part=parts, generator=torch.Generator().manual_seed(1))
     q = q.reshape(2, 2, ns, 3)
     a = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
@@ -397,7 +398,7 @@ def test_sampler_surface_points_on_their_part_with_sigma(two_part_scene):
 
 def test_sampler_without_part_faces_and_sigma_zero(two_part_scene):
     verts, f, G, lo, hi, _ = two_part_scene
-    q = gt.sample_training_queries(verts, f, G, lo, hi, n_uniform=0, n_surface=3000, sigma=0.0,
+    q = tq.sample_training_queries(verts, f, G, lo, hi, n_uniform=0, n_surface=3000, sigma=0.0,
                                    generator=torch.Generator().manual_seed(2))
     pts = q[1].numpy()
     d = np.minimum(np.abs(box_sdf(pts, 1.0)), np.abs(box_sdf(pts - [5.0, 0, 0], 0.5)))
@@ -411,8 +412,8 @@ def test_sampler_whole_body_block(two_part_scene):
     """n_body appends area-weighted whole-mesh samples with body_sigma offsets; the part blocks are unchanged."""
     verts, f, G, lo, hi, parts = two_part_scene
     kw = dict(n_uniform=8, n_surface=8, face_ids_per_part=parts)
-    base = gt.sample_training_queries(verts, f, G, lo, hi, generator=torch.Generator().manual_seed(4), **kw)
-    q = gt.sample_training_queries(verts, f, G, lo, hi, generator=torch.Generator().manual_seed(4), n_body=3000,
+    base = tq.sample_training_queries(verts, f, G, lo, hi, generator=torch.Generator().manual_seed(4), **kw)
+    q = tq.sample_training_queries(verts, f, G, lo, hi, generator=torch.Generator().manual_seed(4), n_body=3000,
                                    body_sigma=0.0, **kw)
     assert q.shape == (2, 2 * 16 + 3000, 3) and torch.equal(q[:, :32], base)
     pts = q[0, 32:].numpy()
@@ -420,35 +421,35 @@ def test_sampler_whole_body_block(two_part_scene):
     assert d.max() < 1e-9  # on the mesh
     assert abs((pts[:, 0] < 2.5).mean() - 0.8) < 0.03  # the big box has 4x the small one's area
     sigma = (0.01, 0.03)
-    q = gt.sample_training_queries(verts, f, G, lo, hi, generator=torch.Generator().manual_seed(5), n_body=8000,
+    q = tq.sample_training_queries(verts, f, G, lo, hi, generator=torch.Generator().manual_seed(5), n_body=8000,
                                    body_sigma=sigma, **kw)[0, 32:].numpy()
     big = np.abs(q).max(1) < 1.2  # around the big box; its faces are flat, so the SDF ~ the normal offset
     for s, block, inside in zip(sigma, (q[:4000], q[4000:]), (big[:4000], big[4000:])):
         sdf = box_sdf(block[inside], 1.0)
         assert abs(sdf.std() / s - 1) < 0.12, (s, sdf.std())
     with pytest.raises(ValueError, match="n_body"):
-        gt.sample_training_queries(verts, f, G, lo, hi, n_body=-1)
+        tq.sample_training_queries(verts, f, G, lo, hi, n_body=-1)
 
 
 def test_sampler_reproducible_and_typed(two_part_scene):
     verts, f, G, lo, hi, parts = two_part_scene
-    run = lambda seed, **kw: gt.sample_training_queries(verts, f, G, lo, hi, n_uniform=16, n_surface=16,
+    run = lambda seed, **kw: tq.sample_training_queries(verts, f, G, lo, hi, n_uniform=16, n_surface=16,
                                                         face_ids_per_part=parts,
                                                         generator=torch.Generator().manual_seed(seed), **kw)
     assert torch.equal(run(5), run(5))
     assert not torch.allclose(run(5), run(6))
-    q32 = gt.sample_training_queries(verts.float(), f, G.float(), lo.float(), hi.float(), n_uniform=4, n_surface=6,
+    q32 = tq.sample_training_queries(verts.float(), f, G.float(), lo.float(), hi.float(), n_uniform=4, n_surface=6,
                                      generator=torch.Generator().manual_seed(5))
     assert q32.dtype == torch.float32 and q32.shape == (2, 20, 3)
-    qn = gt.sample_training_queries(verts.numpy(), f.numpy(), G.numpy(), lo.numpy(), hi.numpy(), n_uniform=4,
+    qn = tq.sample_training_queries(verts.numpy(), f.numpy(), G.numpy(), lo.numpy(), hi.numpy(), n_uniform=4,
                                     n_surface=6, generator=torch.Generator().manual_seed(5))
     assert isinstance(qn, np.ndarray) and qn.shape == (2, 20, 3)
     with pytest.raises(ValueError, match="box_max < box_min"):
-        gt.sample_training_queries(verts, f, G, hi, lo)
+        tq.sample_training_queries(verts, f, G, hi, lo)
     with pytest.raises(ValueError, match="sigma"):
-        gt.sample_training_queries(verts, f, G, lo, hi, sigma=-1.0)
+        tq.sample_training_queries(verts, f, G, lo, hi, sigma=-1.0)
     with pytest.raises(ValueError, match="face_ids_per_part"):
-        gt.sample_training_queries(verts, f, G, lo, hi, face_ids_per_part=parts[:1])
+        tq.sample_training_queries(verts, f, G, lo, hi, face_ids_per_part=parts[:1])
 
 
 # ------------------------------------------------------------------ the default body
@@ -473,7 +474,7 @@ def test_default_body_raycast_sign_matches_winding(default_body_mesh):
     part = Partition(body, n_samples=8)
     G = part.part_transforms(out.full_pose, out.joints)
     lo, hi = part.boxes(v, G)
-    q = gt.sample_training_queries(v, f, G, lo, hi, n_uniform=42, n_surface=42, face_ids_per_part=part.tight_face_ids,
+    q = tq.sample_training_queries(v, f, G, lo, hi, n_uniform=42, n_surface=42, face_ids_per_part=part.tight_face_ids,
                                    generator=torch.Generator().manual_seed(0))[0]
     q = q[torch.randperm(len(q), generator=torch.Generator().manual_seed(1))[:2000]]
     d = gt.mesh_sdf(v[0], f, q)
@@ -494,7 +495,7 @@ def test_default_body_raycast_sign_matches_winding(default_body_mesh):
 def test_surface_samples_uniform_on_a_triangle():
     v = torch.tensor([[[0.0, 0, 0], [2.0, 0, 0], [0.5, 1.5, 0], [9, 9, 9]]], dtype=torch.float64)
     f = torch.tensor([[0, 1, 2], [0, 1, 3]])
-    pts = gt.sample_surface(v, f, 20000, face_ids_per_part=[[0]], generator=torch.Generator().manual_seed(0))[0, 0]
+    pts = tq.sample_surface(v, f, 20000, face_ids_per_part=[[0]], generator=torch.Generator().manual_seed(0))[0, 0]
     assert pts.shape == (20000, 3) and (pts[:, 2] == 0).all()
     # barycentric coordinates of a uniform sample: each has mean 1/3 and second moment 1/6
     A = (v[0, :3, :2] - v[0, 2, :2])[:2].T

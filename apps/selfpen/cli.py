@@ -103,7 +103,9 @@ def render_case(path, faces: np.ndarray, results: dict, size: int = 320) -> None
 
 def run(args) -> int:
     import volsmpl
+    from volsmpl.outputs import check_writable, write_atomic
 
+    check_writable(args.out, "dir", "--out")  # before any work: a bad folder fails in seconds
     models = parse_models(args.model)
     ckpts = _checkpoints(args, models)
     given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks", "tau", "patience", "stall_rtol", "max_step") if getattr(args, k) is not None}
@@ -161,6 +163,6 @@ def run(args) -> int:
         "device": torch.cuda.get_device_name(0) if cfg.device == "cuda" else "cpu",
         "threads": torch.get_num_threads(), "meta": machine_info(cfg.device),
     }
-    (out / "results.json").write_text(json.dumps(result, indent=1))
+    write_atomic(out / "results.json", json.dumps(result, indent=1))
     print(f"wrote {out / 'results.json'}" + (f" and {rendered} render(s)" if rendered else ""))
     return 0

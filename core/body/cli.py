@@ -4,6 +4,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+#: mesh formats `volsmpl body pose --out` writes (trimesh exporters that need no extra package)
+MESH_EXTENSIONS = (".ply", ".obj", ".off", ".stl", ".glb")
+
 
 def add_parser(sub):
     p = sub.add_parser("body", help="export / inspect / pose the default body")
@@ -16,13 +19,31 @@ def add_parser(sub):
     o = s.add_parser("pose", help="write the body in a named pose as a mesh file")
     o.add_argument("--pose", default="t_pose")
     o.add_argument("--model", default=None)
-    o.add_argument("--out", required=True, help="mesh file (.ply, .obj, ...)")
+    o.add_argument("--out", required=True, help=f"mesh file ({', '.join(MESH_EXTENSIONS)})")
     return p
+
+
+def check_mesh_path(path) -> str:
+    """The mesh format of `path` from its extension; ValueError naming the supported ones otherwise."""
+    ext = Path(path).suffix.lower()
+    if ext not in MESH_EXTENSIONS:
+        got = f"extension '{Path(path).suffix}'" if ext else "no extension"
+        raise ValueError(f"--out {path}: {got} is not a supported mesh format; use one of "
+                         f"{', '.join(MESH_EXTENSIONS)} (e.g. {Path(path).with_suffix('.ply').name}).")
+    return ext[1:]
 
 
 def run(args) -> int:
     import torch
 
+    from ..outputs import check_writable, write_atomic
+
+    # output paths first: a bad one fails before any work
+    if args.action == "export" and args.out:
+        check_writable(args.out, "dir", "--out")
+    if args.action == "pose":
+        file_type = check_mesh_path(args.out)
+        check_writable(args.out, "file", "--out")
     from .model import ASSETS, create_body, default_body_metadata
     from .poses import named_pose
 
@@ -54,7 +75,8 @@ def run(args) -> int:
     if args.action == "pose":
         import trimesh
         out = body(body_pose=named_pose(args.pose))
-        trimesh.Trimesh(out.vertices[0].detach().numpy(), body.faces, process=False).export(args.out)
+        data = trimesh.Trimesh(out.vertices[0].detach().numpy(), body.faces, process=False).export(file_type=file_type)
+        write_atomic(args.out, data)
         print(f"wrote {args.out}")
         return 0
     raise ValueError(f"unknown action {args.action}")

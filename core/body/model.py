@@ -174,6 +174,12 @@ class Body(torch.nn.Module):
             raise TypeError(f"Body.forward got unexpected arguments {unknown}; it takes betas, global_orient, body_pose, transl.")
         given = [v for v in (betas, global_orient, body_pose, transl) if torch.is_tensor(v)]
         B = given[0].shape[0] if given and given[0].ndim == 2 else (1 if given else self.batch_size)
+        if B < 1:
+            params = dict(betas=betas, global_orient=global_orient, body_pose=body_pose, transl=transl)
+            empty = [f"{k} has shape {tuple(v.shape)}" for k, v in params.items() if torch.is_tensor(v) and v.shape[:1] == (0,)]
+            raise ValueError(f"Body.forward got a batch of 0 bodies ({empty[0] if empty else f'batch_size={B}'}); give "
+                             f"at least one body: parameters of shape (B, ...) with B >= 1 (skip the call when there "
+                             f"is nothing to pose).")
         like = self.v_template
         J = self.num_joints
         betas = self._param("betas", betas, self.num_betas, B, like)

@@ -3,9 +3,12 @@
 - `objects`: procedural object templates with real-world sizes (cup, bottle, box, ball, bat, phone, skateboard,
   laptop, backpack, suitcase, umbrella, chair, stool, table, sofa, bed, shelf, cart): `make_object`, the size
   prior `SIZE_PRIOR`, named interaction regions (grasp, handle, seat, back, top, deck...), seats and supports.
-- `rooms`: procedural furnished rooms from an integer seed (`make_room`, `ROOM_COUNT` standard seeds): scene mesh,
-  items, free-space grid and exact clearance, start/goal sampling, seats, walls, support surfaces, viewpoints,
-  and the cached 16,384-point FPS scene cloud (`room_points`).
+- `object_shapes`: the per-category procedural shape builders behind `make_object`.
+- `rooms`: procedural furnished rooms from an integer seed (`make_room`, `ROOM_COUNT` standard seeds) and the
+  cached 16,384-point FPS scene cloud (`room_points`).
+- `room`: the `Room` record and its queries: scene mesh, items, free-space grid and exact clearance, start/goal
+  sampling, seats, walls, support surfaces, viewpoints.
+- `furnish`: the layout generator (`furnish_room`): furniture per room kind, overlap-free placement.
 - `points`: surface sampling with normals, farthest-point sampling (open3d), cube crops, fixed-size subsampling,
   torch conversion.
 - `camera`: pinhole cameras on kornia (OpenCV axes): intrinsics from a field of view, look-at extrinsics,
@@ -19,8 +22,8 @@ from .camera import (camera_center, camera_to_world, intrinsics_from_fov, look_a
                      unproject, world_to_camera)
 from .objects import CATEGORIES, HANDHELD, REGIONS, SITTABLE, SIZE_PRIOR, ObjectTemplate, make_object
 from .points import crop_cube, farthest_point_sample, sample_surface, subsample, to_torch
-from .rooms import (GRID_CELL, ROOM_COUNT, ROOM_KINDS, ROOM_VERSION, Item, Room, Seat, Surface, make_room,
-                    room_points)
+from .room import GRID_CELL, Item, Room, Seat, Surface
+from .rooms import ROOM_COUNT, ROOM_KINDS, ROOM_VERSION, make_room, room_points
 
 __all__ = [
     "cache_dir", "cache_path", "cached",
