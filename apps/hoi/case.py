@@ -1,0 +1,236 @@
+"""The human–object case: what the joint optimisation reads, as a documented JSON file.
+
+A case is one image of a person with an object, after the first (independent) stage: the body's pose and shape
+are known in its own frame, the object's mesh and category are known, and each is placed in the camera frame by a
+similarity (scale, rotation, translation) that the first stage got only up to the depth–scale ambiguity of one
+view. The joint stage (apps/hoi/fit.py) refines the two similarities.
+
+Frames: the camera frame is the world (OpenCV axes: x right, y down, z forward; pixels by the intrinsics K).
+The body frame is the body model's output (`body(betas, global_orient, body_pose, transl)`, metres). The object
+frame is the template's (volsmpl.scene.objects: resting on y = 0, front +Z) or the mesh file's own, in metres after
+`units`. A similarity maps a frame into the camera frame: x_cam = scale * R @ x + t.
+
+JSON (format 'volsmpl-hoi-case', version 1):
+
+    {"format": "volsmpl-hoi-case", "version": 1, "name": "cup_0007",
+     "body": {"fingerprint": "dc5681ccaf7defe3", "betas": [10], "global_orient": [3], "body_pose": [69], "transl": [3]},
+     "object": {"category": "cup", "template_seed": 7}            # a template of volsmpl.scene.objects, or
+               {"category": "cup", "mesh": "mug.obj", "units": "mm"},   # any mesh file trimesh reads (path relative to the JSON)
+     "camera": {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], "image_size": [H, W]},
+     "keypoints_2d": [[u, v, confidence] x 24],                    # the body's 24 joints, SMPL order; confidence 0: unseen
+     "silhouette": [[u, v], ...],                                  # pixels of the object's mask (a sample of them)
+     "contacts": [["right_hand", "grasp"], ...],                   # (body part, object region); region 'any': the whole mesh
+     "init": {"human": SIM, "object": SIM},                        # first-stage estimates
+     "truth": {"human": SIM, "object": SIM},                       # optional: the ground truth of a generated case
+     "image": "cup_0007.png"}                                      # optional: the rendered image, for figures
+    SIM = {"scale": s, "rotation": [[3 x 3]], "translation": [3]}
+
+Body parts are the partition's (volsmpl.Partition(body).table.part_names); regions are the template's
+(`ObjectTemplate.regions`), or 'any'.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+FORMAT, VERSION = "volsmpl-hoi-case", 1
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+ANY_REGION = "any"
+
+
+@dataclass
+class Similarity:
+    """x_cam = scale * rotation @ x + translation."""
+
+    scale: float
+    rotation: np.ndarray  # (3, 3)
+    translation: np.ndarray  # (3,)
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """Shape: (..., 3) -> (..., 3)."""
+        return self.scale * np.asarray(x) @ self.rotation.T + self.translation
+
+    def to_dict(self) -> dict:
+        return {"scale": float(self.scale), "rotation": np.asarray(self.rotation).tolist(),
+                "translation": np.asarray(self.translation).tolist()}
+
+    @classmethod
+    def from_dict(cls, d, where: str) -> "Similarity":
+        if not isinstance(d, dict) or not {"scale", "rotation", "translation"} <= set(d):
+            raise ValueError(f"{where} must be an object with 'scale', 'rotation' (3 x 3) and 'translation' (3)")
+        s = float(d["scale"])
+        R = np.asarray(d["rotation"], dtype=np.float64)
+        t = np.asarray(d["translation"], dtype=np.float64)
+        if R.shape != (3, 3) or t.shape != (3,):
+            raise ValueError(f"{where}: rotation must be 3 x 3 and translation 3 numbers, got {R.shape} and {t.shape}")
+        if not (np.isfinite(s) and s > 0 and np.isfinite(R).all() and np.isfinite(t).all()):
+            raise ValueError(f"{where}: scale must be > 0 and every number finite")
+        if np.abs(R.T @ R - np.eye(3)).max() > 1e-4 or np.linalg.det(R) < 0:
+            raise ValueError(f"{where}: rotation is not a rotation matrix (R^T R = I, det 1)")
+        return cls(s, R, t)
+
+
+@dataclass
+class HoiCase:
+    """One case (module docstring). body: tensors betas (10,), global_orient (3,), body_pose (69,), transl (3,)."""
+
+    name: str
+    category: str
+    body: dict
+    fingerprint: str
+    K: np.ndarray
+    image_size: tuple
+    keypoints_2d: np.ndarray  # (24, 3)
+    silhouette: np.ndarray  # (S, 2)
+    contacts: list
+    init: dict  # {'human': Similarity, 'object': Similarity}
+    truth: dict | None = None
+    template_seed: int | None = None
+    mesh_path: str | None = None
+    units: str = "m"
+    image: str | None = None
+    source: Path | None = field(default=None, repr=False)  # folder of the JSON (relative paths)
+
+
+def _array(d: dict, key: str, shape, where: str) -> np.ndarray:
+    if key not in d:
+        raise ValueError(f"{where}: '{key}' is missing")
+    a = np.asarray(d[key], dtype=np.float64)
+    if a.shape != shape and not (shape[0] is None and a.ndim == len(shape) and a.shape[1:] == shape[1:]):
+        raise ValueError(f"{where}: '{key}' must have shape {shape}, got {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{where}: '{key}' contains NaN or Inf")
+    return a
+
+
+def case_from_dict(d: dict, source: Path | None = None) -> HoiCase:
+    """Validate and build a case from its JSON object (clear ValueError naming the field on any problem)."""
+    from volsmpl.scene.objects import CATEGORIES
+
+    where = f"case {d.get('name', '?')!r}" if isinstance(d, dict) else "case"
+    if not isinstance(d, dict) or d.get("format") != FORMAT:
+        raise ValueError(f"{where} is not a human-object case (expected \"format\": \"{FORMAT}\")")
+    if d.get("version") != VERSION:
+        raise ValueError(f"{where} has version {d.get('version')!r}; this volsmpl reads version {VERSION}")
+    b, o, cam = d.get("body"), d.get("object"), d.get("camera")
+    if not isinstance(b, dict) or not isinstance(o, dict) or not isinstance(cam, dict):
+        raise ValueError(f"{where}: 'body', 'object' and 'camera' must be objects")
+    body = {k: torch.as_tensor(_array(b, k, (n,), f"{where} body"), dtype=torch.float32)
+            for k, n in (("betas", 10), ("global_orient", 3), ("body_pose", 69), ("transl", 3))}
+    category = o.get("category")
+    if category not in CATEGORIES:
+        raise ValueError(f"{where}: unknown object category {category!r}; known: {', '.join(CATEGORIES)}")
+    if ("mesh" in o) == ("template_seed" in o):
+        raise ValueError(f"{where}: 'object' needs exactly one of 'mesh' (a file) or 'template_seed' (a template)")
+    units = o.get("units", "m")
+    if units not in UNITS:
+        raise ValueError(f"{where}: object units {units!r} unknown; use one of {', '.join(UNITS)}")
+    K = _array(cam, "K", (3, 3), f"{where} camera")
+    size = tuple(int(x) for x in cam.get("image_size", ()))
+    if len(size) != 2 or min(size) < 1:
+        raise ValueError(f"{where}: camera 'image_size' must be [H, W], got {cam.get('image_size')!r}")
+    contacts = d.get("contacts", [])
+    if not isinstance(contacts, list) or any(not (isinstance(c, (list, tuple)) and len(c) == 2) for c in contacts):
+        raise ValueError(f"{where}: 'contacts' must be a list of [body part, object region] pairs")
+    init = d.get("init")
+    if not isinstance(init, dict):
+        raise ValueError(f"{where}: 'init' (the first-stage estimates of 'human' and 'object') is missing")
+    truth = d.get("truth")
+    return HoiCase(
+        name=str(d.get("name", "case")), category=category, body=body, fingerprint=str(b.get("fingerprint", "")),
+        K=K, image_size=size, keypoints_2d=_array(d, "keypoints_2d", (24, 3), where),
+        silhouette=_array(d, "silhouette", (None, 2), where), contacts=[tuple(map(str, c)) for c in contacts],
+        init={k: Similarity.from_dict(init.get(k), f"{where} init.{k}") for k in ("human", "object")},
+        truth=None if truth is None else {k: Similarity.from_dict(truth.get(k), f"{where} truth.{k}")
+                                          for k in ("human", "object")},
+        template_seed=None if "template_seed" in o and o["template_seed"] is None else o.get("template_seed"),
+        mesh_path=o.get("mesh"), units=units, image=d.get("image"), source=source)
+
+
+def case_to_dict(case: HoiCase) -> dict:
+    """The JSON object of a case (inverse of case_from_dict)."""
+    obj = {"category": case.category}
+    if case.mesh_path is not None:
+        obj.update(mesh=case.mesh_path, units=case.units)
+    else:
+        obj["template_seed"] = case.template_seed
+    d = {"format": FORMAT, "version": VERSION, "name": case.name,
+         "body": {"fingerprint": case.fingerprint, **{k: v.tolist() for k, v in case.body.items()}},
+         "object": obj, "camera": {"K": case.K.tolist(), "image_size": list(case.image_size)},
+         "keypoints_2d": case.keypoints_2d.tolist(), "silhouette": case.silhouette.tolist(),
+         "contacts": [list(c) for c in case.contacts], "init": {k: s.to_dict() for k, s in case.init.items()}}
+    if case.truth is not None:
+        d["truth"] = {k: s.to_dict() for k, s in case.truth.items()}
+    if case.image is not None:
+        d["image"] = case.image
+    return d
+
+
+def load_case(path) -> HoiCase:
+    """Read and validate a case file."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"case file {path} not found")
+    try:
+        d = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"case file {path} is not valid JSON ({e})") from e
+    return case_from_dict(d, path.parent)
+
+
+def save_case(case: HoiCase, path) -> None:
+    """Write a case file atomically."""
+    import os
+    import tempfile
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
+    with os.fdopen(fd, "w") as fh:
+        json.dump(case_to_dict(case), fh)
+    os.replace(tmp, path)
+
+
+def object_mesh(case: HoiCase):
+    """The object's mesh in its own frame (metres) and its regions {name: face ids} (empty for a mesh file).
+
+    A mesh file must hold triangles with finite vertices; its units are converted by `units`."""
+    import trimesh
+
+    from volsmpl.scene.objects import make_object
+
+    if case.mesh_path is None:
+        tmpl = make_object(case.category, seed=case.template_seed)
+        return tmpl.mesh, dict(tmpl.regions)
+    p = Path(case.mesh_path)
+    if not p.is_absolute() and case.source is not None:
+        p = case.source / p
+    if not p.is_file():
+        raise FileNotFoundError(f"case {case.name!r}: object mesh {p} not found")
+    try:
+        mesh = trimesh.load(p, force="mesh", process=False)
+    except Exception as e:  # trimesh raises many kinds for unreadable files
+        raise ValueError(f"case {case.name!r}: cannot read the object mesh {p} ({e}); use a common format (obj, ply, stl, glb, off)") from e
+    if len(mesh.faces) == 0:
+        raise ValueError(f"case {case.name!r}: the object mesh {p} has no triangles (a point cloud?); give a triangle mesh")
+    if not np.isfinite(mesh.vertices).all():
+        raise ValueError(f"case {case.name!r}: the object mesh {p} has NaN or Inf vertices")
+    mesh = trimesh.Trimesh(np.asarray(mesh.vertices) * UNITS[case.units], np.asarray(mesh.faces), process=False)
+    return mesh, {}
+
+
+def check_case(case: HoiCase, fingerprint: str, part_names, regions: dict) -> None:
+    """A case fits the body in use and its object: same body fingerprint, known parts and regions."""
+    if case.fingerprint and case.fingerprint != fingerprint:
+        raise ValueError(f"case {case.name!r} was made for body {case.fingerprint}, this body is {fingerprint}; "
+                         f"use the body it was made for or regenerate the case")
+    for part, region in case.contacts:
+        if part not in part_names:
+            raise ValueError(f"case {case.name!r}: contact part {part!r} is not a body part; parts: {', '.join(part_names)}")
+        if region != ANY_REGION and region not in regions:
+            known = ", ".join([ANY_REGION, *regions])
+            raise ValueError(f"case {case.name!r}: contact region {region!r} is not a region of the object; regions: {known}")
