@@ -22,7 +22,8 @@ JSON (format 'volsmpl-hoi-case', version 1):
      "contacts": [["right_hand", "grasp"], ...],                   # (body part, object region); region 'any': the whole mesh
      "init": {"human": SIM, "object": SIM},                        # first-stage estimates
      "truth": {"human": SIM, "object": SIM},                       # optional: the ground truth of a generated case
-     "image": "cup_0007.png"}                                      # optional: the rendered image, for figures
+     "image": "cup_0007.png",                                      # optional: the rendered image, for figures
+     "meta": {"kind": "hold_cup"}}                                 # optional: the producer's notes
     SIM = {"scale": s, "rotation": [[3 x 3]], "translation": [3]}
 
 Body parts are the partition's (volsmpl.Partition(body).table.part_names); regions are the template's
@@ -93,6 +94,7 @@ class HoiCase:
     mesh_path: str | None = None
     units: str = "m"
     image: str | None = None
+    meta: dict = field(default_factory=dict)  # free-form notes of the producer (e.g. the database's kind), kept in the JSON
     source: Path | None = field(default=None, repr=False)  # folder of the JSON (relative paths)
 
 
@@ -148,7 +150,7 @@ def case_from_dict(d: dict, source: Path | None = None) -> HoiCase:
         truth=None if truth is None else {k: Similarity.from_dict(truth.get(k), f"{where} truth.{k}")
                                           for k in ("human", "object")},
         template_seed=None if "template_seed" in o and o["template_seed"] is None else o.get("template_seed"),
-        mesh_path=o.get("mesh"), units=units, image=d.get("image"), source=source)
+        mesh_path=o.get("mesh"), units=units, image=d.get("image"), meta=dict(d.get("meta") or {}), source=source)
 
 
 def case_to_dict(case: HoiCase) -> dict:
@@ -167,6 +169,8 @@ def case_to_dict(case: HoiCase) -> dict:
         d["truth"] = {k: s.to_dict() for k, s in case.truth.items()}
     if case.image is not None:
         d["image"] = case.image
+    if case.meta:
+        d["meta"] = case.meta
     return d
 
 

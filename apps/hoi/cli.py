@@ -155,7 +155,7 @@ def run(args) -> int:
         "paper": paper.rows("hoi"), "summary": summary,
         "cases": {m: [asdict(r) for r in rs] for m, rs in per_model.items()},
         "figures": {"summary": "summary.png", **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: args.render]}},
-        "checkpoints": {m: (str(model_kind(m).default_checkpoint) if model_kind(m).learned else None) for m in models},
+        "checkpoints": {m: (f"core/assets/{model_kind(m).checkpoint}" if model_kind(m).learned else None) for m in models},
         "meta": machine_info(args.device),
     }
     write_atomic(out / "results.json", json.dumps(result, indent=1))
