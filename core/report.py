@@ -54,8 +54,9 @@ _CKPTS = ("core/assets/volsmpl_anny.safetensors", "core/assets/coap_anny.safeten
 
 
 def _app(name: str, tables: tuple, title: str) -> Section:
-    return Section(title, tables, (f"apps/{name}",), {name: (f"docs/{name}_results.json", f"out/{name}/results.json")},
-                   {name: f"volsmpl {name} --out out/{name}"}, rs.summary_section, (), _CKPTS)
+    return Section(title, tables, (f"apps/{name}",), {name: (f"docs/{name}/results.json", f"out/{name}/results.json")},
+                   {name: f"volsmpl {name} --out out/{name}"},
+                   rs.summary_section, (), _CKPTS)
 
 
 SECTIONS: dict[str, Section] = {

@@ -94,7 +94,7 @@ def repo(tmp_path):
     except (OSError, subprocess.CalledProcessError):
         pytest.skip("git is not available")
     write(tmp_path / "apps" / "hoi" / "run.py", "v = 1\n")
-    write(tmp_path / "docs" / "hoi_results.json", {"summary": {"volsmpl": {"iter_ms": 1.0}}})  # no commit recorded
+    write(tmp_path / "docs" / "hoi" / "results.json", {"summary": {"volsmpl": {"iter_ms": 1.0}}})  # no commit recorded
     _git(tmp_path, "add", ".")
     _git(tmp_path, "commit", "-q", "-m", "first", date="2026-01-01T00:00:00+00:00")
     first = _git(tmp_path, "rev-parse", "--short", "HEAD")
@@ -126,7 +126,7 @@ def test_stale_when_the_producer_changed_after_the_recorded_commit(repo):
 
 
 def test_git_unavailable_is_said_not_guessed(tmp_path):
-    write(tmp_path / "docs" / "hoi_results.json", HOI)
+    write(tmp_path / "docs" / "hoi" / "results.json", HOI)
     text, status = report.build_report(tmp_path / "r.md", root=tmp_path, git=report.Git(tmp_path / "nowhere"))
     assert status["unknown"] == ["hoi"] and status["stale"] == []
     assert "**unknown**: not checked: git unavailable (" in text
