@@ -18,6 +18,7 @@ SUBCOMMANDS = {
     "demo": ("volsmpl.demo", "pose the default body; meshes, part picture, SDF slice and surfaces"),
     "eval": ("volsmpl.evaluate", "evaluate a checkpoint on the validation set (paper Table 1 protocol)"),
     "report": ("volsmpl.report", "write docs/report.md: every result table beside the paper's numbers"),
+    "motion": ("volsmpl.apps.motion.cli", "scene-constrained walking: VolumetricSMPL vs COAP vs exact mesh (paper Table 5, D.1)"),
     "hoi": ("volsmpl.apps.hoi.cli", "human-object joint optimisation: VolumetricSMPL vs COAP vs exact mesh (paper Table 3)"),
     "selfpen": ("volsmpl.apps.selfpen.cli", "repair self-intersections by pose optimisation (paper Table 6)"),
     "train": ("volsmpl.train", "train the volumetric model on the default body (resumable; torchrun for DDP)"),
