@@ -1,0 +1,264 @@
+"""`volsmpl motion`: scene-constrained walking with VolumetricSMPL, COAP and/or the exact mesh (Table 5, D.1).
+
+    volsmpl motion --model volsmpl,coap,mesh --scenes 2 --sequences 2 --out out/motion
+    volsmpl motion --model volsmpl --scenes all              # 15 rooms x 8 pairs, as the paper
+    volsmpl motion --scene room.ply --up z --units mm --start 1.2,0.4 --goal 3.1,2.0 --model volsmpl
+
+Per model (and per collision weight: COAP's sweep w in {0.01, 0.1, 1}, Table D.1) every start/goal pair is walked
+by optimising the walking model (apps/motion/walk.py) against the objective of supp. D.3 (objective.py). The
+collision term's per-frame time and memory are measured once per model on the full 16,384-point cloud (forward,
+and forward + backward); the longest sequence whose forward + backward fits --mem-budget-gb follows from the
+per-frame memory, and a model for which --frames do not fit is evaluated on 16 evenly spaced frames (the authors'
+COAP setting; --coll-frames forces 'all' or a number).
+
+Writes OUT/results.json (summary.<model> and summary.<model>_w<w>, the paper's rows, per-sequence records, meta),
+OUT/topdown_<scene>.png and OUT/strip_<scene>_<k>_<model>.png for the first --render sequences.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import torch
+
+PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
+TABLE5_COAP_W = 0.1     # Table 5's COAP row is D.1's w = 0.1 row
+ALL_SCENES = 15
+
+
+def add_parser(sub):
+    p = sub.add_parser("motion", help="scene-constrained walking: VolumetricSMPL vs COAP vs exact mesh (Table 5)",
+                       description="Walk from start to goal through furnished rooms (or your own scan) by "
+                                   "optimising a differentiable walking model against a goal, a scene collision and "
+                                   "a jerk term; report per-frame cost, total memory, collisions and goal distance.")
+    p.add_argument("--model", default="volsmpl,coap,mesh", help="comma-separated kinds: volsmpl, coap, mesh")
+    p.add_argument("--scenes", default="2", help="'all' (15 generated rooms) or a number of rooms")
+    p.add_argument("--sequences", type=int, default=8, help="start/goal pairs per room (default 8)")
+    p.add_argument("--scene", default=None, help="your own scene: a mesh or point cloud file (instead of rooms)")
+    p.add_argument("--start", default=None, help="with --scene: start floor position A,B (negative: --start=-1,2; the file's horizontal "
+                                                 "axes in order, its units)")
+    p.add_argument("--goal", default=None, help="with --scene: goal floor position A,B")
+    p.add_argument("--up", default="y", choices=["y", "z"], help="with --scene: the file's up axis")
+    p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="with --scene: the file's units")
+    p.add_argument("--floor-y", type=float, default=None,
+                   help="with --scene: floor height in metres after conversion (default: 1st percentile)")
+    p.add_argument("--frames", type=int, default=80, help="frames per sequence (paper 80-120)")
+    p.add_argument("--iters", type=int, default=100, help="Adam steps (paper 100)")
+    p.add_argument("--lr", type=float, default=0.05, help="Adam learning rate, linearly decayed (paper 0.05)")
+    p.add_argument("--w", action="append", default=[], metavar="MODEL=W[,W...]",
+                   help="collision weights of a model, e.g. --w coap=0.1 (default volsmpl=1, mesh=1, "
+                        "coap=0.01,0.1,1 as Table D.1); repeatable")
+    p.add_argument("--coll-frames", default="auto",
+                   help="frames the collision term evaluates: 'auto' (all if they fit --mem-budget-gb, else 16), "
+                        "'all', or a number")
+    p.add_argument("--mem-budget-gb", type=float, default=24.0,
+                   help="memory budget for max_frames_in_budget and --coll-frames auto (default 24, the paper's GPU)")
+    p.add_argument("--residuals", action="store_true", help="optimise per-frame pose residuals too (pose prior)")
+    p.add_argument("--floor-in-loss", action="store_true",
+                   help="keep the floor points in the optimised collision term (slow on a CPU; metrics always count them)")
+    p.add_argument("--cost-frames", type=int, default=8, help="frames batched in the per-frame cost measurement")
+    p.add_argument("--cost-repeats", type=int, default=3, help="repeats of the cost measurement (median)")
+    p.add_argument("--render", type=int, default=1, help="frame strips of the first N sequences per scene (0: none)")
+    p.add_argument("--out", default="out/motion", help="output folder")
+    p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    p.add_argument("--seed", type=int, default=0, help="first room seed")
+    return p
+
+
+def parse_xy(text, name: str):
+    if text is None:
+        raise ValueError(f"--scene needs --start and --goal (A,B floor positions); {name} is missing")
+    try:
+        a, b = (float(v) for v in str(text).split(","))
+    except ValueError:
+        raise ValueError(f"{name} must be two numbers A,B, got {text!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise ValueError(f"{name} must be finite, got {text!r}")
+    return a, b
+
+
+def parse_weights(items, models) -> dict:
+    out = {m: list(PAPER_W.get(m, [1.0])) for m in models}
+    for it in items:
+        if "=" not in it:
+            raise ValueError(f"--w takes MODEL=W[,W...], got {it!r}")
+        m, ws = it.split("=", 1)
+        m = m.strip()
+        if m not in out:
+            raise ValueError(f"--w {it!r}: model {m!r} is not in --model ({', '.join(models)})")
+        try:
+            vals = [float(v) for v in ws.split(",") if v.strip()]
+        except ValueError:
+            raise ValueError(f"--w {it!r}: weights must be numbers") from None
+        if not vals or any(not math.isfinite(v) or v < 0 for v in vals):
+            raise ValueError(f"--w {it!r}: weights must be finite and >= 0")
+        out[m] = vals
+    return out
+
+
+def _wkey(model: str, w: float) -> str:
+    """Summary key of a (model, weight) run: the paper's D.1 row keys ('coap_w0.01', 'coap_w0.1', 'coap_w1.0')."""
+    s = f"{w:g}"
+    return f"{model}_w{s if '.' in s else s + '.0'}"
+
+
+def _mean(xs):
+    xs = [x for x in xs if x is not None and np.isfinite(x)]
+    return float(np.mean(xs)) if xs else None
+
+
+def summarize(records: list, cost: dict, total_mem_mb: float, max_frames: int, coll_frames) -> dict:
+    keys = ("goal_dist_m", "collision_cm", "collision_obstacles_cm", "collision_frames_pct", "foot_skate_cm",
+            "max_depth_cm", "jerk_max", "path_m", "optim_s", "ms_per_iter")
+    s = {k: _mean([r["metrics"][k] for r in records]) for k in keys}
+    s.update({"mem_per_frame_mb": cost["mem_per_frame_fwd_mb"], "mem_per_frame_fwdbwd_mb": cost["mem_per_frame_fwdbwd_mb"],
+              "ms_per_frame_fwd": cost["ms_per_frame_fwd"], "ms_per_frame_fwdbwd": cost["ms_per_frame_fwdbwd"],
+              "total_mem_mb": total_mem_mb, "max_frames_in_budget": max_frames, "n_sequences": len(records),
+              "collision_frames_evaluated": coll_frames, "memory_kind": cost["memory_kind"]})
+    # Table 5's columns in the paper's units
+    s.update({"frame_mem_gb": s["mem_per_frame_mb"] / 1024, "frame_ms": s["ms_per_frame_fwd"],
+              "total_mem_gb": total_mem_mb / 1024})
+    return s
+
+
+def format_table(summary: dict) -> str:
+    cols = [("ms_per_frame_fwd", "ms/fr fwd", "{:.1f}"), ("ms_per_frame_fwdbwd", "ms/fr f+b", "{:.1f}"),
+            ("mem_per_frame_mb", "MB/fr fwd", "{:.1f}"), ("mem_per_frame_fwdbwd_mb", "MB/fr f+b", "{:.1f}"),
+            ("total_mem_mb", "total MB", "{:.0f}"), ("max_frames_in_budget", "max fr", "{}"),
+            ("collision_cm", "coll cm", "{:.3f}"), ("collision_frames_pct", "coll fr %", "{:.1f}"),
+            ("goal_dist_m", "goal m", "{:.3f}"), ("foot_skate_cm", "skate cm", "{:.3f}"), ("optim_s", "s/seq", "{:.0f}"),
+            ("n_sequences", "n", "{}")]
+    lines = ["{:14s}".format("run") + " ".join(f"{c[1]:>10s}" for c in cols)]
+    for k, s in summary.items():
+        lines.append(f"{k:14s}" + " ".join(f"{(c[2].format(s[c[0]]) if s.get(c[0]) is not None else '-'):>10s}"
+                                           for c in cols))
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    import volsmpl
+    from volsmpl import paper
+    from volsmpl.models import parse_models
+    from volsmpl.outputs import check_writable, write_atomic
+    from volsmpl.provenance import machine_info
+
+    from . import walk as W
+    from .figures import topdown
+    from .scenes import check_endpoint, floor_xz, load_scene, room_scenes
+    from .synth import SynthConfig, check_frames, measure_cost, synthesize
+
+    out = check_writable(args.out, "dir", "--out")
+    models = parse_models(args.model)
+    weights = parse_weights(args.w, models)
+    frames = check_frames(args.frames)
+    if args.iters < 0:
+        raise ValueError(f"--iters must be >= 0, got {args.iters}")
+    if args.sequences < 1:
+        raise ValueError(f"--sequences must be >= 1, got {args.sequences}")
+    if args.mem_budget_gb <= 0:
+        raise ValueError(f"--mem-budget-gb must be > 0, got {args.mem_budget_gb}")
+    cf = str(args.coll_frames).strip().lower()
+    if cf not in ("auto", "all") and not (cf.isdigit() and int(cf) >= 1):
+        raise ValueError(f"--coll-frames must be 'auto', 'all' or a number >= 1, got {args.coll_frames!r}")
+    if args.device == "cuda" and not torch.cuda.is_available():
+        raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
+    if args.threads:
+        torch.set_num_threads(args.threads)
+
+    if args.scene is not None:
+        sc = load_scene(args.scene, up=args.up, units=args.units, floor_y=args.floor_y)
+        s = check_endpoint(sc, floor_xz(parse_xy(args.start, "--start"), args.up, args.units), "--start")
+        g = check_endpoint(sc, floor_xz(parse_xy(args.goal, "--goal"), args.up, args.units), "--goal")
+        if np.linalg.norm(g - s) < 0.1:
+            raise ValueError("--start and --goal are less than 10 cm apart: nothing to walk")
+        sc.pairs = [(s, g)]
+        scenes = [sc]
+    else:
+        if args.start is not None or args.goal is not None:
+            raise ValueError("--start/--goal need --scene (generated rooms draw their own pairs)")
+        n = ALL_SCENES if str(args.scenes).strip().lower() == "all" else int(args.scenes)
+        if n < 1:
+            raise ValueError(f"--scenes must be 'all' or >= 1, got {args.scenes}")
+        scenes = room_scenes(n, args.sequences, frames, first_seed=args.seed)
+
+    body = volsmpl.create_body().to(args.device)
+    model = W.WalkModel(body)
+    volumes = {m: volsmpl.attach_volume(body, model=m).to(args.device) for m in models}
+    budget = args.mem_budget_gb * 2 ** 30
+    sc0 = scenes[0]
+    s0, g0 = sc0.pairs[0]
+    from .synth import initial_controls, _speed
+    init = initial_controls(s0, g0, frames, body.v_template.dtype, body.v_template.device)
+    with torch.no_grad():
+        probe = model(init["heading_delta"], _speed(init["speed_u"]), frames=frames, start=init["start"],
+                      heading0=init["heading0"])
+    costs, coll_frames = {}, {}
+    for m in models:   # the per-frame cost on the full cloud, on the straight walk of the first pair
+        costs[m] = measure_cost(volumes[m], probe, sc0.points, frames=args.cost_frames, repeats=args.cost_repeats,
+                                device=args.device)
+        fb = costs[m]["mem_per_frame_fwdbwd_mb"] * 2 ** 20
+        costs[m]["max_frames_in_budget"] = int(budget // fb) if fb > 0 else None
+        fits = costs[m]["max_frames_in_budget"] is None or costs[m]["max_frames_in_budget"] >= frames
+        coll_frames[m] = ("all" if fits else 16) if cf == "auto" else ("all" if cf == "all" else int(cf))
+        print(f"{m:8s} collision term per frame: {costs[m]['ms_per_frame_fwd']:.1f} ms fwd, "
+              f"{costs[m]['ms_per_frame_fwdbwd']:.1f} ms fwd+bwd, {costs[m]['mem_per_frame_fwd_mb']:.1f} MB fwd, "
+              f"{costs[m]['mem_per_frame_fwdbwd_mb']:.1f} MB fwd+bwd; {costs[m]['max_frames_in_budget']} frames fit "
+              f"{args.mem_budget_gb:g} GB -> collision on {coll_frames[m]} frames")
+
+    records = {(m, w): [] for m in models for w in weights[m]}
+    cases = []
+    for sc in scenes:
+        paths = {}
+        for k, (s, g) in enumerate(sc.pairs):
+            for m in models:
+                for w in weights[m]:
+                    cfg = SynthConfig(frames=frames, iters=args.iters, lr=args.lr, residuals=args.residuals,
+                                      floor_in_loss=args.floor_in_loss, coll_frames=coll_frames[m], device=args.device)
+                    r = synthesize(model, volumes[m], sc, s, g, w, cfg)
+                    met = r["metrics"]
+                    label = m if len(weights[m]) == 1 else _wkey(m, w)
+                    paths.setdefault(label, []).append(np.asarray(met["pelvis_xz"]))
+                    rec = {"scene": sc.name, "sequence": k, "model": m, "w": w, "start": np.asarray(s).tolist(),
+                           "goal": np.asarray(g).tolist(), "frames": frames, "collision_frames": coll_frames[m],
+                           "metrics": met}
+                    records[(m, w)].append(rec)
+                    cases.append(rec)
+                    print(f"{sc.name:8s} seq {k} {label:12s} goal {met['goal_dist_m']:.3f} m  collision "
+                          f"{met['collision_cm']:.3f} cm ({met['collision_frames_pct']:.0f}% frames)  skate "
+                          f"{met['foot_skate_cm']:.3f} cm  {met['optim_s']:.0f} s")
+                    if k < args.render:
+                        W.render_strip(r["walk"], body.faces, out / f"strip_{sc.name}_{k}_{label}.png", every=10)
+        topdown(sc, paths, sc.pairs, path=out / f"topdown_{sc.name}.png")
+
+    summary = {}
+    for (m, w), recs in records.items():
+        total = max(r["metrics"]["optim_peak_mem_mb"] for r in recs)
+        s = summarize(recs, costs[m], total, costs[m]["max_frames_in_budget"], coll_frames[m])
+        s["w"] = w
+        if len(weights[m]) == 1 or (m == "coap" and w == TABLE5_COAP_W):
+            summary[m] = s
+        if m == "coap" or (m == "volsmpl" and w == 1.0):
+            summary[_wkey(m, w)] = dict(s)
+    if "coap" not in summary and "coap" in models:   # a sweep without 0.1: Table 5's row is its first weight
+        summary["coap"] = dict(summary[_wkey("coap", weights["coap"][0])])
+    print()
+    print(format_table(summary))
+    print("per-frame cost: the collision term on the full cloud (" + ", ".join(sorted({c["memory_kind"] for c in costs.values()}))
+          + "); total: peak of one whole-sequence optimisation; collision: exact mesh test, every scene point")
+    result = {
+        "config": {"models": models, "weights": weights, "frames": frames, "iters": args.iters, "lr": args.lr,
+                   "scenes": [sc.name for sc in scenes], "sequences": args.sequences if args.scene is None else 1,
+                   "coll_frames": coll_frames, "mem_budget_gb": args.mem_budget_gb, "residuals": args.residuals,
+                   "floor_in_loss": args.floor_in_loss, "user_scene": args.scene, "device": args.device,
+                   "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
+                                "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"},
+        "summary": summary, "cost": costs,
+        "paper": {**paper.rows("motion"), **paper.rows("coll_weights")},
+        "cases": cases, "meta": machine_info(args.device),
+    }
+    write_atomic(out / "results.json", json.dumps(result, indent=1))
+    print(f"wrote {out / 'results.json'}")
+    return 0

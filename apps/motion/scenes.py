@@ -1,0 +1,183 @@
+"""Scenes and start/goal pairs of the motion app: generated rooms (volsmpl.scene) and a user's own scan.
+
+A `MotionScene` is a point cloud (16,384 farthest-point samples of the surfaces, floor included; Y up, metres,
+floor at `floor_y`) with a name, and its start/goal pairs (x, z floor positions). Generated rooms
+(`room_scene(seed)`) come with the room itself (for footprints in plots); `load_scene(path, ...)` reads a mesh or a
+point cloud in any format trimesh reads (ply, obj, off, stl, glb, xyz...) or a .npy/.npz/.txt array of points,
+converts up-axis and units, and samples it to 16,384 points.
+
+`check_endpoint` refuses a start or goal off the floor or inside an obstacle, with a clear ValueError.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from volsmpl.scene import farthest_point_sample, make_room, room_points, sample_surface
+
+N_POINTS = 16384
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+BODY_CLEAR = 0.15     # metres: no obstacle point this close (horizontally) to a start or goal, below BODY_HEIGHT
+BODY_HEIGHT = 1.8
+MIN_PAIR_DISTANCE = 1.6   # metres: shorter pairs cannot have furniture between two 0.5 m-clear ends
+CROSS_TOL = 0.02     # metres: a pair's straight line passes this close to (or through) a furniture footprint
+FLOOR_REACH = 0.3     # metres: a floor point must lie this close to a start or goal
+
+
+@dataclass
+class MotionScene:
+    """A scene cloud and its start/goal pairs. points (N, 3) float32, floor (N,) bool (floor points), pairs:
+    list of (start (2,), goal (2,)) floor positions (x, z)."""
+
+    name: str
+    points: np.ndarray
+    floor: np.ndarray
+    floor_y: float = 0.0
+    room: object = None
+    pairs: list = field(default_factory=list)
+
+
+def check_cloud(points, what: str = "scene") -> np.ndarray:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"the {what} cloud must be (N, 3), got shape {p.shape}")
+    if len(p) == 0:
+        raise ValueError(f"the {what} cloud is empty: give a mesh or a point cloud with points")
+    if not np.isfinite(p).all():
+        raise ValueError(f"the {what} cloud holds {int((~np.isfinite(p)).any(1).sum())} points with NaN or Inf "
+                         f"coordinates; clean the file first")
+    return p
+
+
+def check_endpoint(scene: MotionScene, xz, which: str) -> np.ndarray:
+    """ValueError unless the floor position xz (2,) is on the floor (a floor point within FLOOR_REACH) and free
+    (no obstacle point within BODY_CLEAR horizontally, between 5 cm and BODY_HEIGHT above the floor)."""
+    q = np.asarray(xz, dtype=np.float64).reshape(-1)
+    if q.shape != (2,) or not np.isfinite(q).all():
+        raise ValueError(f"{which} must be two finite numbers x,z; got {xz!r}")
+    P = scene.points
+    d = np.linalg.norm(P[:, [0, 2]] - q, axis=1)
+    if not (scene.floor & (d < FLOOR_REACH)).any():
+        raise ValueError(f"{which} ({q[0]:.2f}, {q[1]:.2f}) is off the floor of scene '{scene.name}': no floor point "
+                         f"within {FLOOR_REACH} m; pick a position on the floor")
+    h = P[:, 1] - scene.floor_y
+    obst = (~scene.floor) & (h > 0.05) & (h < BODY_HEIGHT) & (d < BODY_CLEAR)
+    if obst.any():
+        raise ValueError(f"{which} ({q[0]:.2f}, {q[1]:.2f}) is inside an obstacle of scene '{scene.name}' "
+                         f"({int(obst.sum())} scene points within {BODY_CLEAR} m); pick a free floor position")
+    return q
+
+
+def walk_distance(frames: int, speed: float = 1.1) -> float:
+    """Start-goal distance of a sequence of `frames` frames at `speed` m/s (leaves room for a detour)."""
+    return speed * (frames - 1) / 30.0
+
+
+def room_scene(seed: int, sequences: int = 8, frames: int = 80, clearance: float = 0.5) -> MotionScene:
+    """A generated room (volsmpl.scene.make_room) with `sequences` start/goal pairs, each farther than `clearance`
+    from furniture and walls (0.5 m: the first frame is mid-stride, its front foot ~0.35 m ahead of the pelvis), whose straight line crosses a furniture footprint (Room.sample_start_goal(blocked=True)
+    and Room.path_clearance <= CROSS_TOL); ValueError if the room has too few."""
+    room = make_room(int(seed))
+    pairs = []
+    dist = max(walk_distance(frames), MIN_PAIR_DISTANCE)
+    seen = set()
+    for k in range(sequences * 8):
+        if len(pairs) == sequences:
+            break
+        for dd in (dist, 0.85 * dist, 0.7 * dist):
+            try:
+                s, g = room.sample_start_goal(dd, clearance=clearance, seed=1000 * k + int(seed), blocked=True)
+            except ValueError:
+                continue
+            key = (round(s[0], 2), round(s[2], 2), round(g[0], 2), round(g[2], 2))
+            if room.path_clearance(s, g) > CROSS_TOL:   # the straight line must cross a piece of furniture
+                continue
+            if key not in seen:
+                seen.add(key)
+                pairs.append((s[[0, 2]], g[[0, 2]]))
+            break
+    if len(pairs) < sequences:
+        raise ValueError(f"room {seed} has only {len(pairs)} blocked start/goal pairs")
+    cloud = room_points(int(seed))   # the (cached) 16,384-point FPS cloud, only for rooms that are kept
+    return MotionScene(f"room{seed}", cloud["points"], cloud["labels"] == -1, room.floor_y, room, pairs)
+
+
+def room_scenes(n: int, sequences: int = 8, frames: int = 80, first_seed: int = 0, max_seed: int = 100) -> list:
+    """The first n generated rooms (seeds from first_seed up) that hold `sequences` blocked pairs each."""
+    out, seed = [], first_seed
+    while len(out) < n and seed < first_seed + max_seed:
+        try:
+            out.append(room_scene(seed, sequences, frames))
+        except ValueError:
+            pass
+        seed += 1
+    if len(out) < n:
+        raise ValueError(f"only {len(out)} of {n} rooms with {sequences} blocked start/goal pairs in seeds "
+                         f"{first_seed}..{first_seed + max_seed - 1}; ask for fewer scenes or sequences")
+    return out
+
+
+def _to_y_up(p: np.ndarray, up: str) -> np.ndarray:
+    if up == "y":
+        return p
+    if up == "z":   # (x, y, z) z-up -> (x, z, -y) y-up: the floor axes x, y become x, -z
+        return np.stack([p[:, 0], p[:, 2], -p[:, 1]], 1)
+    raise ValueError(f"--up must be 'y' or 'z', got {up!r}")
+
+
+def floor_xz(ab, up: str, units: str) -> np.ndarray:
+    """A user's floor coordinates (the input's horizontal axes in order: y-up x,z; z-up x,y; the input's units)
+    -> our (x, z) in metres."""
+    a, b = (float(v) * UNITS[units] for v in ab)
+    return np.array([a, b]) if up == "y" else np.array([a, -b])
+
+
+def load_scene(path, up: str = "y", units: str = "m", n: int = N_POINTS, floor_y: float | None = None,
+               floor_band: float = 0.03, seed: int = 0) -> MotionScene:
+    """A user's mesh or point cloud as a MotionScene (module docstring). The floor is at `floor_y` (metres, after
+    conversion; default the 1st percentile of the heights) and the floor points are those within floor_band; the cloud
+    is shifted so that the floor is at y = 0."""
+    if units not in UNITS:
+        raise ValueError(f"--units must be one of {', '.join(UNITS)}, got {units!r}")
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"--scene {path}: no such file")
+    suffix = p.suffix.lower()
+    if suffix in (".npy", ".npz", ".txt", ".csv"):
+        if suffix == ".npy":
+            arr = np.load(p)
+        elif suffix == ".npz":
+            z = np.load(p)
+            arr = z["points"] if "points" in z else z[z.files[0]]
+        else:
+            arr = np.loadtxt(p, delimiter="," if suffix == ".csv" else None, ndmin=2)[:, :3]
+        pts = check_cloud(arr)
+    else:
+        import trimesh
+        try:
+            geom = trimesh.load(p, force=None)
+        except Exception as e:  # noqa: BLE001 - any reader error is the file's problem
+            raise ValueError(f"--scene {path}: cannot read it ({type(e).__name__}: {e})") from None
+        if isinstance(geom, trimesh.Scene):
+            geom = geom.to_geometry() if hasattr(geom, "to_geometry") else geom.dump(concatenate=True)
+        if isinstance(geom, trimesh.Trimesh) and len(geom.faces):
+            if not np.isfinite(geom.vertices).all():
+                raise ValueError(f"--scene {path}: the mesh has NaN or Inf vertices")
+            pts = sample_surface(geom, n * 4, seed=seed)[0]
+        elif hasattr(geom, "vertices"):
+            pts = np.asarray(geom.vertices)
+        else:
+            raise ValueError(f"--scene {path}: not a mesh or a point cloud ({type(geom).__name__})")
+        pts = check_cloud(pts)
+    pts = _to_y_up(pts * UNITS[units], up)
+    if len(pts) > n:
+        pts = pts[farthest_point_sample(pts, n, seed=seed)]
+    fy = float(np.percentile(pts[:, 1], 1.0)) if floor_y is None else float(floor_y)
+    floor = np.abs(pts[:, 1] - fy) < floor_band
+    if not floor.any():
+        raise ValueError(f"--scene {path}: no floor points at height {fy:.3f} m (+/- {floor_band} m); check --up, "
+                         f"--units and --floor-y")
+    pts[:, 1] -= fy   # the walking model's floor is y = 0
+    return MotionScene(p.stem, pts.astype(np.float32), floor, 0.0)

@@ -1,0 +1,193 @@
+"""The motion app (volsmpl.apps.motion: objective, scenes, synthesis, CLI) against exact references: finite
+differences of the goal term, the exact mesh penetration of points in a wall, collision_loss on the full cloud."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import volsmpl
+from volsmpl.apps.motion import objective as O
+from volsmpl.apps.motion import scenes as S
+from volsmpl.apps.motion import walk as W
+from volsmpl.mesh_distance import mesh_signed_distance
+
+
+@pytest.fixture(scope="module")
+def walk_model(body):
+    return W.WalkModel(body)
+
+
+@pytest.fixture(scope="module")
+def short_walk(walk_model):
+    """A straight walk of 10 frames from the origin facing +Z."""
+    return walk_model(*W.straight_controls(1, 1, speed=1.3), frames=10)
+
+
+def _wall(x: float, step: float = 0.02):
+    """A vertical plane of points x = const, y in [0.2, 1.6], z in [-0.6, 1.0] (a wall)."""
+    y, z = np.meshgrid(np.arange(0.2, 1.6, step), np.arange(-0.6, 1.0, step))
+    return np.stack([np.full(y.size, x), y.ravel(), z.ravel()], 1).astype(np.float32)
+
+
+# ------------------------------------------------------------------------------------------------ goal term
+def test_goal_loss_values_and_gradient():
+    p = torch.tensor([[0.5, 0.9, -2.0]], dtype=torch.float64)
+    g = torch.tensor([[0.0, 0.0]], dtype=torch.float64)
+    # Huber delta 1: x 0.5 -> 0.5 * 0.25; z 2.0 -> 2.0 - 0.5; the height does not count
+    assert torch.allclose(O.goal_loss(p, g), torch.tensor([0.125 + 1.5], dtype=torch.float64))
+    assert torch.allclose(O.goal_distance(p, g), torch.tensor([np.hypot(0.5, 2.0)], dtype=torch.float64))
+    x = (p + torch.tensor([[0.1, 0.0, 0.3]], dtype=torch.float64)).requires_grad_(True)
+    O.goal_loss(x, g).sum().backward()
+    eps = 1e-6
+    for k in range(3):
+        d = torch.zeros_like(p)
+        d[0, k] = eps
+        fd = (O.goal_loss(x.detach() + d, g) - O.goal_loss(x.detach() - d, g)) / (2 * eps)
+        assert abs(x.grad[0, k].item() - fd.item()) < 1e-8
+
+
+def test_goal_gradient_through_the_walk():
+    """d goal / d speed through the walking model: autograd vs central differences (float64)."""
+    m = W.WalkModel(volsmpl.create_body().double())
+    h, s = W.straight_controls(1, 2, speed=1.2, dtype=torch.float64)
+    goal = torch.tensor([[0.3, 2.5]], dtype=torch.float64)
+    s_ = s.clone().requires_grad_(True)
+    O.goal_loss(m(h, s_).joints[:, -1, 0], goal).sum().backward()
+    d = torch.tensor([[1.0, -0.5]], dtype=torch.float64)
+    eps = 1e-6
+    f = lambda v: O.goal_loss(m(h, v).joints[:, -1, 0], goal).item()  # noqa: E731
+    fd = (f(s + eps * d) - f(s - eps * d)) / (2 * eps)
+    assert abs((s_.grad * d).sum().item() - fd) < 1e-6 + 1e-5 * abs(fd)
+    assert s_.grad.abs().sum() > 0
+
+
+# ------------------------------------------------------------------------------------------------ collision term
+def test_collision_zero_in_free_space(body, short_walk):
+    vol = volsmpl.attach_volume(body, model="mesh")
+    term = O.SceneCollision(vol, _wall(1.5))
+    v = short_walk.vertices.detach().clone().requires_grad_(True)
+    walk = W.Walk(**{**short_walk.__dict__, "vertices": v})
+    loss = term(walk)
+    assert loss.item() == 0.0 and term.last_stats["active_rows"] == 0
+    loss.sum().backward() if loss.requires_grad else None
+    assert v.grad is None or v.grad.abs().max() == 0
+
+
+@pytest.mark.parametrize("kind", ["mesh", "volsmpl", "coap"])
+def test_collision_in_a_wall_matches_the_full_cloud(body, short_walk, kind):
+    """A wall through the body's left side: SceneCollision (culled, grouped) equals collision_loss on the full
+    cloud, value and gradient; it is positive, and for the exact mesh it equals the penetration of the points
+    inside the mesh, and moving the body out of the wall lowers it."""
+    vol = volsmpl.attach_volume(body, model=kind)
+    x_wall = float(short_walk.joints[0, :, 0, 0].mean()) + 0.12      # 12 cm to the side of the pelvis
+    pts = np.concatenate([_wall(x_wall), _wall(2.0)])
+    rows = torch.tensor([0, 4, 9])
+    base = O.walk_output(short_walk, rows)
+    outs = []
+    for culled in (True, False):
+        v = base.vertices.detach().clone().requires_grad_(True)
+        out = type(base)(vertices=v, joints=base.joints.detach(), full_pose=base.full_pose.detach())
+        val = (O.SceneCollision(vol, pts).per_frame(out) if culled else
+               vol.collision_loss(out, torch.as_tensor(pts), reduction="sum"))
+        val.sum().backward()
+        outs.append((val.detach(), v.grad.clone()))
+    (a, ga), (b, gb) = outs
+    assert (a > 0).all()
+    assert torch.allclose(a, b, rtol=1e-4, atol=1e-6)
+    assert torch.allclose(ga, gb, rtol=1e-3, atol=1e-5)
+    if kind == "mesh":
+        P = torch.as_tensor(pts, dtype=torch.float64)
+        for i in range(len(rows)):
+            sd = mesh_signed_distance(base.vertices[i].detach().double(), torch.as_tensor(body.faces).long(), P)
+            assert abs(torch.relu(-sd).sum().item() - a[i].item()) < 1e-4
+    # gradient: the wall is at +x of the body, so the loss pushes the vertices towards -x
+    assert ga[..., 0].sum() > 0
+    moved = type(base)(vertices=base.vertices - torch.tensor([0.1, 0.0, 0.0]), joints=base.joints - torch.tensor([0.1, 0.0, 0.0]),
+                       full_pose=base.full_pose)
+    assert O.SceneCollision(vol, pts).per_frame(moved).sum() < a.sum()
+
+
+def test_frame_subset_and_unit_grad():
+    assert O.frame_subset(80, 16).tolist()[:3] == [0, 5, 11] and len(O.frame_subset(80, 16)) == 16
+    assert O.frame_subset(80, "all").tolist() == list(range(80)) and len(O.frame_subset(10, 16)) == 10
+    a = torch.zeros(2, 3, requires_grad=True)
+    b = torch.zeros(2, 4, requires_grad=True)
+    opt = O.UnitGradAdam([{"params": [a]}, {"params": [b]}], lr=0.1)
+    a.grad, b.grad = torch.tensor([[3.0, 0, 0], [0, 0, 1e-3]]), torch.tensor([[4.0, 0, 0, 0], [0, 0, 0, 0]])
+    opt.step()
+    assert torch.allclose(torch.cat([a.grad, b.grad], 1).norm(dim=1), torch.ones(2))
+    assert O.linear_decay(100)(0) == 1.0 and abs(O.linear_decay(100)(99) - 0.01) < 1e-12
+
+
+# ------------------------------------------------------------------------------------------------ scenes, errors
+def _user_scene(tmp_path):
+    """A 4 x 4 m floor (one quad, as a scan) with a 1 m box in the middle, z-up, centimetres."""
+    import trimesh
+    floor = trimesh.Trimesh([[-200, -200, 0], [200, -200, 0], [200, 200, 0], [-200, 200, 0]], [[0, 1, 2], [0, 2, 3]])
+    box = trimesh.creation.box(bounds=[[-50, -50, 0], [50, 50, 100]])
+    path = tmp_path / "room.ply"
+    trimesh.util.concatenate([floor, box]).export(path)
+    return path
+
+
+def test_user_scene_and_bad_inputs(tmp_path):
+    path = _user_scene(tmp_path)
+    sc = S.load_scene(path, up="z", units="cm")
+    assert sc.points.shape == (S.N_POINTS, 3) and abs(sc.points[:, 1].min()) < 1e-4
+    assert sc.points[:, 1].max() == pytest.approx(1.0, abs=0.01) and sc.floor.any()
+    ok = S.check_endpoint(sc, S.floor_xz((-150, 0), "z", "cm"), "--start")
+    assert np.allclose(ok, [-1.5, 0.0])
+    with pytest.raises(ValueError, match="inside an obstacle"):
+        S.check_endpoint(sc, S.floor_xz((0, 0), "z", "cm"), "--goal")
+    with pytest.raises(ValueError, match="off the floor"):
+        S.check_endpoint(sc, [9.0, 9.0], "--goal")
+    empty = tmp_path / "empty.npy"
+    np.save(empty, np.zeros((0, 3)))
+    with pytest.raises(ValueError, match="empty"):
+        S.load_scene(empty)
+    bad = tmp_path / "nan.npy"
+    np.save(bad, np.array([[0.0, 0, 0], [np.nan, 1, 1]]))
+    with pytest.raises(ValueError, match="NaN or Inf"):
+        S.load_scene(bad)
+    with pytest.raises(ValueError, match="empty"):
+        O.SceneCollision(volsmpl.attach_volume(volsmpl.create_body(), model="mesh"), np.zeros((0, 3)))
+
+
+def test_cli_errors_are_one_line(tmp_path, capsys):
+    from volsmpl.cli import main
+    path = _user_scene(tmp_path)
+    out = str(tmp_path / "o")
+    cases = [(["--frames", "1"], "frames must be"),
+             (["--scene", str(path), "--up", "z", "--units", "cm", "--start", "0,0", "--goal", "150,0"], "inside an obstacle"),
+             (["--scene", str(path), "--up", "z", "--units", "cm", "--start=-150,0", "--goal=900,0"], "off the floor"),
+             (["--w", "mesh=x"], "weights must be numbers")]
+    for extra, msg in cases:
+        assert main(["motion", "--model", "mesh", "--out", out] + extra) == 2
+        err = capsys.readouterr().err.strip()
+        assert msg in err and "\n" not in err
+
+
+# ------------------------------------------------------------------------------------------------ end to end
+@pytest.mark.slow
+def test_end_to_end_every_model(tmp_path):
+    from volsmpl.cli import main
+    out = tmp_path / "motion"
+    rc = main(["motion", "--model", "volsmpl,coap,mesh", "--w", "coap=0.1", "--scenes", "1", "--sequences", "1",
+               "--frames", "10", "--iters", "2", "--cost-frames", "1", "--cost-repeats", "1", "--render", "1",
+               "--out", str(out)])
+    assert rc == 0
+    d = json.loads((out / "results.json").read_text())
+    for key in ("volsmpl", "coap", "mesh", "coap_w0.1", "volsmpl_w1.0"):
+        s = d["summary"][key]
+        for k in ("mem_per_frame_mb", "ms_per_frame_fwd", "ms_per_frame_fwdbwd", "total_mem_mb", "max_frames_in_budget",
+                  "collision_cm", "collision_frames_pct", "goal_dist_m", "foot_skate_cm", "n_sequences",
+                  "frame_mem_gb", "frame_ms", "total_mem_gb"):
+            assert s[k] is not None, (key, k)
+        assert s["n_sequences"] == 1 and np.isfinite(s["goal_dist_m"])
+    assert d["paper"]["volsmpl"]["frame_ms"] == 3.78 and "coap_w0.01" in d["paper"]
+    assert len(d["cases"]) == 3 and "meta" in d
+    assert (out / f"topdown_{d['config']['scenes'][0]}.png").exists()
+    assert len(list(out.glob("strip_*.png"))) == 3
