@@ -148,17 +148,20 @@ def run(args) -> int:
                   f"{a.get('obj_rot_err_deg', float('nan')):5.1f} deg")
         if i < args.render:
             case_panel(out / f"case_{case.name}.png", problems[models[0]], results)
-    summary = {m: summarize(rs) for m, rs in per_model.items()}
-    summary_plot(out / "summary.png", summary)
-    result = {
-        "config": asdict(cfg), "models": models, "split": args.split, "seed": args.seed,
-        "paper": paper.rows("hoi"), "summary": summary,
-        "cases": {m: [asdict(r) for r in rs] for m, rs in per_model.items()},
-        "figures": {"summary": "summary.png", **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: args.render]}},
-        "checkpoints": {m: (f"core/assets/{model_kind(m).checkpoint}" if model_kind(m).learned else None) for m in models},
-        "meta": machine_info(args.device),
-    }
-    write_atomic(out / "results.json", json.dumps(result, indent=1))
+        # results so far, after every case: a long run stopped early still leaves its finished cases
+        summary = {m: summarize(rs) for m, rs in per_model.items()}
+        result = {
+            "config": asdict(cfg), "models": models, "split": args.split, "seed": args.seed,
+            "cases_requested": len(cases), "paper": paper.rows("hoi"), "summary": summary,
+            "cases": {m: [asdict(r) for r in rs] for m, rs in per_model.items()},
+            "figures": {"summary": "summary.png",
+                        **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: min(i + 1, args.render)]}},
+            "checkpoints": {m: (f"core/assets/{model_kind(m).checkpoint}" if model_kind(m).learned else None)
+                            for m in models},
+            "meta": machine_info(args.device),
+        }
+        summary_plot(out / "summary.png", summary)
+        write_atomic(out / "results.json", json.dumps(result, indent=1))
     print(format_table(summary))
     print(f"wrote {out / 'results.json'}")
     return 0
