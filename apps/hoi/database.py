@@ -39,7 +39,8 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from .case import HoiCase, Similarity, case_to_dict, load_case, save_case
-from .interactions import RECIPES, Recipe, Rig
+from .interactions import RECIPES, Recipe
+from .rig import Rig
 
 DB_VERSION = 1
 KIND_NAMES = tuple(RECIPES)

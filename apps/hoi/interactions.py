@@ -3,7 +3,7 @@
 Each recipe `fn(rig, rng) -> Recipe` designs one kind of interaction in the body frame of an upright body
 (Y up, facing +Z, the body model's output with transl 0): hand-designed joint angles (named poses where they
 exist) with seeded variation inside `JOINT_LIMITS`, hands brought onto their contact places by a small inverse
-kinematics (`Rig.reach`: forward kinematics of the 24 joints in torch, angles bounded by the anatomical limits
+kinematics (`Rig.reach` in rig.py: forward kinematics of the 24 joints in torch, angles bounded by the anatomical limits
 through a sigmoid, so no solution leaves them), and the object template placed so that the body's contact
 parts touch its contact region. The exact touching (and no interpenetration) is done by the database's
 resolver: it slides the object along `Recipe.push` (the contact normal, pointing away from the body) until
@@ -14,188 +14,17 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 from scipy.spatial.transform import Rotation
 
-from volsmpl.body.model import SMPL_JOINT_NAMES, SMPL_PARENTS
-from volsmpl.body.poses import BODY_JOINTS, EULER_ORDER, JOINT_LIMITS, NAMED_POSES, euler_to_body_pose
+from volsmpl.body.model import SMPL_JOINT_NAMES
+from volsmpl.body.poses import BODY_JOINTS
 from volsmpl.scene.objects import make_object
 
-_LIM = np.array([JOINT_LIMITS[j] for j in BODY_JOINTS])  # (23, 3, 2)
+from .rig import Rig, jitter, named_euler, set_joints
+
 _J = {n: i for i, n in enumerate(SMPL_JOINT_NAMES)}
-ARM = {s: [f"{s}_collar", f"{s}_shoulder", f"{s}_elbow", f"{s}_wrist"] for s in ("left", "right")}
 #: the interaction kinds: name -> (recipe function name, object category)
 KINDS: dict[str, str] = {}
-
-
-def named_euler(name: str) -> np.ndarray:
-    """(23, 3) Euler angles of a named pose."""
-    e = np.zeros((23, 3))
-    for joint, angles in NAMED_POSES[name].items():
-        e[BODY_JOINTS.index(joint)] = angles
-    return e
-
-
-def clip_limits(e: np.ndarray, margin: float = 1e-4) -> np.ndarray:
-    return np.clip(e, _LIM[..., 0] + margin, _LIM[..., 1] - margin)
-
-
-def jitter(e: np.ndarray, rng: np.random.Generator, sd: float = 0.06, joints=None) -> np.ndarray:
-    """Seeded variation: Gaussian (sd radians, clipped at 2 sd) on the given joints (default all), within limits."""
-    e = e.copy()
-    idx = range(23) if joints is None else [BODY_JOINTS.index(j) for j in joints]
-    for i in idx:
-        e[i] += np.clip(rng.standard_normal(3), -2, 2) * sd
-    return clip_limits(e)
-
-
-def _set(e: np.ndarray, **joints) -> np.ndarray:
-    for j, v in joints.items():
-        e[BODY_JOINTS.index(j)] = v
-    return e
-
-
-# ----------------------------------------------------------------------------------------------- kinematics
-def _euler_matrix(ang: torch.Tensor, order: str) -> torch.Tensor:
-    """(3,) angles (x, y, z) -> (3, 3), intrinsic rotations in `order` (scipy's upper-case convention)."""
-    out = torch.eye(3, dtype=ang.dtype)
-    for a in order:
-        i = "XYZ".index(a)
-        c, s = torch.cos(ang[i]), torch.sin(ang[i])
-        one, zero = torch.ones_like(c), torch.zeros_like(c)
-        if a == "X":
-            m = torch.stack([one, zero, zero, zero, c, -s, zero, s, c])
-        elif a == "Y":
-            m = torch.stack([c, zero, s, zero, one, zero, -s, zero, c])
-        else:
-            m = torch.stack([c, -s, zero, s, c, zero, zero, zero, one])
-        out = out @ m.reshape(3, 3)
-    return out
-
-
-class Rig:
-    """The body of one case: shape, rest joints and hand/foot reference points, with forward kinematics.
-
-    palm(side): a point on the palm's skin (mean of the palm vertices), its outward normal and the finger
-    direction, rigidly attached to the hand joint."""
-
-    def __init__(self, body, partition, betas: torch.Tensor):
-        self.body, self.partition, self.betas = body, partition, betas.reshape(1, -1)
-        with torch.no_grad():
-            out = body(betas=self.betas)
-        self.rest_joints = out.joints[0].double()
-        v = out.vertices[0].double().numpy()
-        import trimesh
-        nrm = trimesh.Trimesh(v, partition.faces.numpy(), process=False).vertex_normals
-        lab = partition.vertex_labels.numpy()
-        names = partition.table.part_names
-        self.palm_rest = {}
-        for side, sign in (("left", 1.0), ("right", -1.0)):
-            wx = float(self.rest_joints[_J[f"{side}_wrist"], 0])
-            x = sign * (v[:, 0] - wx)
-            sel = (lab == names.index(f"{side}_hand")) & (nrm[:, 1] < -0.6) & (x > 0.02) & (x < 0.10)
-            self.palm_rest[side] = torch.as_tensor(v[sel].mean(0))
-        self.parents = SMPL_PARENTS
-
-    def fk(self, euler: torch.Tensor, global_R: torch.Tensor):
-        """euler (23, 3) -> global rotations (24, 3, 3), joint positions (24, 3) (transl 0)."""
-        Rs, P = [global_R], [self.rest_joints[0]]
-        for j in range(1, 24):
-            p = self.parents[j]
-            loc = _euler_matrix(euler[j - 1], EULER_ORDER[BODY_JOINTS[j - 1]])
-            Rs.append(Rs[p] @ loc)
-            P.append(P[p] + Rs[p] @ (self.rest_joints[j] - self.rest_joints[p]))
-        return torch.stack(Rs), torch.stack(P)
-
-    def palm(self, R, P, side: str):
-        """Palm point, outward palm normal, finger direction from fk output."""
-        h = _J[f"{side}_hand"]
-        sign = 1.0 if side == "left" else -1.0
-        p = P[h] + R[h] @ (self.palm_rest[side] - self.rest_joints[h])
-        n = R[h] @ torch.tensor([0.0, -1.0, 0.0], dtype=R.dtype)
-        f = R[h] @ torch.tensor([sign, 0.0, 0.0], dtype=R.dtype)
-        return p, n, f
-
-    def reach(self, euler: np.ndarray, global_R: np.ndarray, targets: dict, iters: int = 60) -> tuple[np.ndarray, float]:
-        """Move the arms (collar, shoulder, elbow, wrist) so that each side's palm meets its target.
-
-        targets: {side: {'p': (3,) palm point, 'n': (3,) palm normal (optional), 'f': (3,) finger direction
-        (optional)}}, in the body frame. Angles stay inside JOINT_LIMITS (sigmoid bounds). Returns the new
-        euler (23, 3) and the largest palm position error (m)."""
-        sides = list(targets)
-        idx = [BODY_JOINTS.index(j) for s in sides for j in ARM[s]]
-        lo = torch.as_tensor(_LIM[idx, :, 0]) + 1e-4
-        hi = torch.as_tensor(_LIM[idx, :, 1]) - 1e-4
-        x0 = torch.as_tensor(np.clip(euler[idx], lo.numpy() + 1e-3, hi.numpy() - 1e-3))
-        u0 = (x0 - lo) / (hi - lo)
-        theta = torch.log(u0 / (1 - u0)).clone().requires_grad_(True)
-        gR = torch.as_tensor(global_R, dtype=torch.float64)
-        with torch.no_grad():  # the trunk is fixed: only the arm chains move
-            R0, P0 = self.fk(torch.as_tensor(euler), gR)
-        tg = {s: {k: torch.as_tensor(np.asarray(v, dtype=np.float64)) for k, v in t.items()} for s, t in targets.items()}
-        chains = {s: [_J[j] for j in ARM[s]] + [_J[f"{s}_hand"]] for s in sides}
-        hand_local = {s: _euler_matrix(torch.as_tensor(euler[_J[f"{s}_hand"] - 1]), EULER_ORDER[f"{s}_hand"]) for s in sides}
-
-        def arm_fk(ang, s):
-            """ang (4, 3): collar..wrist -> hand joint rotation and position."""
-            j0 = chains[s][0]
-            p = self.parents[j0]
-            R, P = R0[p], P0[p]
-            for k, j in enumerate(chains[s]):
-                P = P + R @ (self.rest_joints[j] - self.rest_joints[self.parents[j]])
-                loc = _euler_matrix(ang[k], EULER_ORDER[BODY_JOINTS[j - 1]]) if k < 4 else hand_local[s]
-                R = R @ loc
-            return R, P
-
-        def palm_of(ang, s):
-            R, P = arm_fk(ang, s)
-            sign = 1.0 if s == "left" else -1.0
-            p = P + R @ (self.palm_rest[s] - self.rest_joints[_J[f"{s}_hand"]])
-            return p, -R[:, 1], sign * R[:, 0]
-
-        def loss_fn():
-            a = lo + (hi - lo) * torch.sigmoid(theta)
-            loss = 1e-3 * ((a - x0) ** 2).sum()
-            for i, s in enumerate(sides):
-                t = tg[s]
-                p, n, f = palm_of(a[4 * i:4 * i + 4], s)
-                loss = loss + 1e3 * ((p - t["p"]) ** 2).sum()
-                if "n" in t:
-                    loss = loss + 2.0 * (1 - n @ t["n"])
-                if "f" in t:
-                    loss = loss + 0.5 * (1 - f @ t["f"])
-            return loss
-
-        opt = torch.optim.LBFGS([theta], lr=1, max_iter=iters, line_search_fn="strong_wolfe")
-
-        def closure():
-            opt.zero_grad()
-            loss = loss_fn()
-            loss.backward()
-            return loss
-
-        opt.step(closure)
-        with torch.no_grad():
-            a = lo + (hi - lo) * torch.sigmoid(theta)
-            err = max(float((palm_of(a[4 * i:4 * i + 4], s)[0] - tg[s]["p"]).norm()) for i, s in enumerate(sides))
-            e = euler.copy()
-            e[idx] = np.round(a.numpy(), 6)
-        return e, err
-
-    def joints(self, euler: np.ndarray, global_R: np.ndarray):
-        with torch.no_grad():
-            return self.fk(torch.as_tensor(euler), torch.as_tensor(global_R, dtype=torch.float64))
-
-    def pose(self, euler: np.ndarray, global_R: np.ndarray):
-        """Body output (float32) of euler angles and a root rotation."""
-        go = torch.as_tensor(Rotation.from_matrix(global_R).as_rotvec(), dtype=torch.float32)[None]
-        with torch.no_grad():
-            return self.body(betas=self.betas, global_orient=go, body_pose=euler_to_body_pose(euler[None]))
-
-    def part_vertices(self, vertices: np.ndarray, *parts: str) -> np.ndarray:
-        names = self.partition.table.part_names
-        lab = self.partition.vertex_labels.numpy()
-        return vertices[np.isin(lab, [names.index(p) for p in parts])]
 
 
 # ----------------------------------------------------------------------------------------------- recipes
@@ -248,7 +77,7 @@ def _sit(kind: str, category: str):
         e = named_euler("sitting")
         hip = -1.45 - 0.15 * rng.random()
         spine = rng.uniform(-0.1, 0.15)
-        e = _set(e, left_hip=(hip, 0, 0.12), right_hip=(hip, 0, -0.12), spine1=(spine, 0, 0),
+        e = set_joints(e, left_hip=(hip, 0, 0.12), right_hip=(hip, 0, -0.12), spine1=(spine, 0, 0),
                  left_shoulder=(0, -0.35, -1.2), right_shoulder=(0, 0.35, 1.2),
                  left_elbow=(0, -0.9, 0), right_elbow=(0, 0.9, 0))
         e = jitter(e, rng, 0.05, ["spine1", "spine2", "spine3", "neck", "head", "left_shoulder", "right_shoulder",
@@ -258,8 +87,8 @@ def _sit(kind: str, category: str):
         seat_h = seat["height"] if seat else float(tmpl.extents[1])
 
         def drop(knee):  # seat contact height minus the soles' height
-            ek = _set(e.copy(), left_knee=(knee, 0, 0), right_knee=(knee, 0, 0))
-            ek = _set(ek, left_ankle=(float(np.clip(-(hip + knee), -0.7, 0.5)), 0, 0),
+            ek = set_joints(e.copy(), left_knee=(knee, 0, 0), right_knee=(knee, 0, 0))
+            ek = set_joints(ek, left_ankle=(float(np.clip(-(hip + knee), -0.7, 0.5)), 0, 0),
                       right_ankle=(float(np.clip(-(hip + knee), -0.7, 0.5)), 0, 0))
             v = rig.pose(ek, G).vertices[0].double().numpy()
             return float(rig.part_vertices(v, "pelvis")[:, 1].min()) - _soles(rig, v), ek
@@ -294,7 +123,7 @@ def lie_bed(rig: Rig, rng: np.random.Generator, template_seed: int) -> Recipe:
     tmpl = make_object("bed", seed=template_seed)
     G = Rotation.from_euler("x", -90, degrees=True).as_matrix()  # supine, head towards -Z (the headboard)
     e = named_euler("arms_down")
-    e = _set(e, left_shoulder=(0, 0, -1.15), right_shoulder=(0, 0, 1.15))
+    e = set_joints(e, left_shoulder=(0, 0, -1.15), right_shoulder=(0, 0, 1.15))
     e = jitter(e, rng, 0.04, ["spine1", "spine2", "spine3", "left_shoulder", "right_shoulder", "left_elbow",
                               "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip"])
     e[[BODY_JOINTS.index("left_hip"), BODY_JOINTS.index("right_hip")], 0] = np.clip(
@@ -310,7 +139,7 @@ def lie_bed(rig: Rig, rng: np.random.Generator, template_seed: int) -> Recipe:
     pz_lo, pz_hi = pv[:, 2].min(), pv[:, 2].max()
 
     # the head on the mattress just foot-ward of the pillows (lying on the pillows would lift the shoulders)
-    e = _set(e, neck=(rng.uniform(0.0, 0.25), rng.uniform(-0.3, 0.3), 0))
+    e = set_joints(e, neck=(rng.uniform(0.0, 0.25), rng.uniform(-0.3, 0.3), 0))
     v = rig.pose(e, G).vertices[0].double().numpy()
     tz = float(rig.part_vertices(v, "head")[:, 2].min()) - pz_hi - 0.015
     v = rig.pose(e, G).vertices[0].double().numpy()
@@ -360,7 +189,7 @@ def _two_hands(kind: str, category: str):
                   "right": {"p": centre - 0.5 * gap * axis + off * fwd, "n": axis, "f": fwd}}
             return rig.reach(start, G, tg)
 
-        e0 = _set(e.copy(), left_shoulder=(0, -0.9, -0.8), right_shoulder=(0, 0.9, 0.8),
+        e0 = set_joints(e.copy(), left_shoulder=(0, -0.9, -0.8), right_shoulder=(0, 0.9, 0.8),
                   left_elbow=(0, -1.0, 0), right_elbow=(0, 1.0, 0))
         return Recipe(kind, e0, G, tmpl, R, t,
                       [("left_hand", "grasp", True), ("right_hand", "grasp", True), ("chest", "any", False),
@@ -392,7 +221,7 @@ def _one_hand(kind: str, category: str, region: str):
             p = sh + np.array([-sgn * rng.uniform(0.0, 0.06), -rng.uniform(0.28, 0.38), rng.uniform(0.3, 0.38)])
             n = inward
             f = np.array([0.0, 0.15, 1.0]); f /= np.linalg.norm(f)
-        e0 = _set(e.copy(), **{f"{side}_shoulder": (0, sgn * -0.8, sgn * -1.0), f"{side}_elbow": (0, sgn * -1.2, 0)})
+        e0 = set_joints(e.copy(), **{f"{side}_shoulder": (0, sgn * -0.8, sgn * -1.0), f"{side}_elbow": (0, sgn * -1.2, 0)})
         e, err = rig.reach(e0, G, {side: {"p": p, "n": n, "f": f}})
         R_, P_ = rig.joints(e, G)
         pp, nn, ff = (x.numpy() for x in rig.palm(R_, P_, side))
@@ -437,7 +266,7 @@ def skateboard(rig: Rig, rng: np.random.Generator, template_seed: int) -> Recipe
     tmpl = make_object("skateboard", seed=template_seed)
     ab, hip, knee = rng.uniform(0.12, 0.2), -rng.uniform(0.05, 0.3), rng.uniform(0.05, 0.45)
     e = named_euler("a_pose")
-    e = _set(e, left_hip=(hip, 0, ab), right_hip=(hip, 0, -ab), left_knee=(knee, 0, 0), right_knee=(knee, 0, 0),
+    e = set_joints(e, left_hip=(hip, 0, ab), right_hip=(hip, 0, -ab), left_knee=(knee, 0, 0), right_knee=(knee, 0, 0),
              left_ankle=(-(hip + knee), 0, -ab), right_ankle=(-(hip + knee), 0, ab))
     e = jitter(e, rng, 0.05, ["spine1", "spine2", "spine3", "neck", "head", "left_shoulder", "right_shoulder",
                               "left_elbow", "right_elbow"])
@@ -460,7 +289,7 @@ def _hands_on(kind: str, category: str, region: str):
         lean = rng.uniform(0.25, 0.45) if category == "table" else rng.uniform(0.05, 0.2)
         G = Rotation.from_euler("x", lean, degrees=False).as_matrix()  # torso forward
         e = named_euler("arms_down")
-        e = _set(e, left_hip=(-lean, 0, 0.03), right_hip=(-lean, 0, -0.03))
+        e = set_joints(e, left_hip=(-lean, 0, 0.03), right_hip=(-lean, 0, -0.03))
         e = jitter(e, rng, 0.04, ["spine1", "spine2", "spine3", "neck", "head"])
         v = rig.pose(e, G).vertices[0].double().numpy()
         floor = _soles(rig, v)
@@ -479,7 +308,7 @@ def _hands_on(kind: str, category: str, region: str):
             z = front + rng.uniform(0.1, 0.16)
             targets = {"left": {"p": [half, top_y + 0.005, z], "n": [0, -1, 0], "f": [0, 0, 1]},
                        "right": {"p": [-half, top_y + 0.005, z], "n": [0, -1, 0], "f": [0, 0, 1]}}
-        e0 = _set(e.copy(), left_shoulder=(0, -1.0, -0.9), right_shoulder=(0, 1.0, 0.9))
+        e0 = set_joints(e.copy(), left_shoulder=(0, -1.0, -0.9), right_shoulder=(0, 1.0, 0.9))
         e, err = rig.reach(e0, G, targets)
         R_, P_ = rig.joints(e, G)
         palms = np.stack([rig.palm(R_, P_, s)[0].numpy() for s in ("left", "right")])

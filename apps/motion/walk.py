@@ -57,6 +57,10 @@ the goal-at-last-pelvis objective it feeds.
     w = model(heading_delta, speed)
     out = model.body(**w.params())                    # (2 * 98) bodies, or use w.joints / w.vertices directly
     loss = smooth_l1(w.joints[:, -1, 0], goal) + jerk(w.joints).mean() + pose_prior(residual).mean()
+
+Where things are: the gait cycle (keyframes, `walk_cycle`, `anchor_weights`, `stance_contacts`) in gait.py; the
+objective's terms and pictures (`pose_prior`, `jerk`, `foot_skate`, `render_strip`) in measures.py, re-exported
+here; this module holds the primitive layout and path controls, `Walk` and `WalkModel`.
 """
 from __future__ import annotations
 
@@ -66,7 +70,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from volsmpl.body.model import SMPL_JOINT_NAMES
+from .gait import (ANKLE_JOINTS, FOOT_JOINTS, STANCE, anchor_weights, axis_quat, quat_mul, quat_to_axis_angle,
+                   stance_contacts, walk_cycle, walk_cycle_quat)
+# the measures are part of this module's API (callers use walk.jerk, walk.foot_skate, ...)
+from .measures import JERK_WEIGHT, check_tensor, foot_skate, jerk, pose_prior, render_strip
 
 __all__ = ["FPS", "PRIMITIVE_FRAMES", "HISTORY_FRAMES", "STANCE", "JERK_WEIGHT", "NOMINAL_SPEED", "Walk", "WalkModel",
            "walk_cycle", "anchor_weights", "stance_contacts", "num_frames", "num_primitives", "straight_controls",
@@ -75,190 +82,7 @@ __all__ = ["FPS", "PRIMITIVE_FRAMES", "HISTORY_FRAMES", "STANCE", "JERK_WEIGHT",
 FPS = 30.0
 PRIMITIVE_FRAMES = 8
 HISTORY_FRAMES = 2
-STANCE = 0.62          # fraction of the cycle a foot is on the ground (heel strike at 0, toe off at 0.62)
-DOUBLE_SUPPORT = STANCE - 0.5
-CONTACT_END = 0.60     # contact labels end here: the toes leave the floor over [0.60, 0.62] (lifting < 1.5 cm)
-JERK_WEIGHT = 0.1      # weight of the jerk term in the objective (DartControl's optimisation)
 NOMINAL_SPEED = 1.3    # m/s, the default of straight_controls
-
-_J = {n: i for i, n in enumerate(SMPL_JOINT_NAMES)}
-FOOT_JOINTS = (_J["left_foot"], _J["right_foot"])      # the balls of the feet: anchors of the foot lock
-ANKLE_JOINTS = (_J["left_ankle"], _J["right_ankle"])
-_EULER_ORDER = {n: ("YXZ" if n.endswith("elbow") else "XYZ") for n in SMPL_JOINT_NAMES[1:]}  # as volsmpl.body.poses
-
-# ------------------------------------------------------------------------------------------------ the walk cycle
-# Keyframes (degrees) uniformly spaced over one cycle, phase 0 = this side's heel strike; periodic Catmull-Rom
-# between them. Gait-lab signs (flexion positive), converted to SMPL's Euler signs in walk_cycle. Designed by hand after
-# normal-gait curves (Winter, 'Biomechanics and Motor Control of Human Movement'; the hip as the thigh's angle to the
-# vertical, pelvis upright), then fitted once on the default body (Adam, 150 steps, through this module: sum of squared
-# stance slide of the balls and sole heights in stance, swing clearance >= 2.5 cm, stride 1.4 m, staying near the hand
-# design and smooth) and rounded to 0.1 deg. The hip curve is scaled by _STRIDE_GAIN.
-_KEYS = {
-    # thigh flexion (forward +): peak extension at ~55 %, peak flexion at ~88 %
-    "hip_flex": [21.4, 19.7, 16.5, 6.9, -1.4, -7.7, -12.7, -8.4, -0.8, 12.8, 23.8, 27.8],
-    # knee flexion: loading-response bump, near-straight mid-stance, 60 deg at ~72 % in swing, straight at heel strike
-    "knee_flex": [5.8, 7.7, 8.3, 7.1, 4.8, 5.3, 14.6, 29.5, 48.7, 49.2, 32.2, 13.3],
-    # foot pitch to the floor during stance (toe down +): heel strike toe up, flat, heel rise into push-off
-    "foot_pitch": [-2.9, -3.0, -2.4, -1.2, 1.7, 8.2, 18.0, 32.2, 38.6, 29.7, 14.7, 2.4],
-    # ankle plantarflexion in swing (used where the foot is off the ground)
-    "ankle_swing": [-2.3, -0.6, -0.1, 0.2, 1.2, 3.8, 7.3, 7.7, 0.7, -6.9, -7.9, -5.5],
-    # stance weight of the foot-pitch rule for the ankle (1 in stance, 0 in mid-swing)
-    "stance_rule": [1, 1, 1, 1, 1, 1, 1, 0.9, 0.3, 0, 0, 0.4],
-    # toe extension (toes bent up +) during heel rise, so the toes stay on the floor
-    "toe_ext": [-0.6, -0.7, -0.7, -0.3, 1.3, 5.2, 11.7, 15.7, 13.2, 7.2, 2.4, 0.1],
-    # hip abduction (+ away from the midline): slight adduction in stance keeps the foot under the body
-    "hip_abd": [-1.0, -2.8, -4.4, -4.4, -3.3, -1.5, 0.6, 2.0, 2.4, 2.3, 1.6, 0.6],
-}
-_STRIDE_GAIN = 1.25
-_PELVIS_YAW = 5.0     # deg: the forward leg's side of the pelvis leads
-_PELVIS_ROLL = 3.0    # deg: the swing side drops
-_PELVIS_TILT = 2.0    # deg forward lean, +/- 1 deg at twice the step frequency
-_TRUNK_LEAN = 3.0     # deg forward lean of the chest
-_THORAX_YAW = 4.0     # deg counter-rotation of the spine (relative to the pelvis: spine total -pelvis - this)
-_ARM_SWING = 16.0     # deg shoulder flexion amplitude (counter-phase with the same side's leg)
-_ARM_LOWER = 72.0     # deg arms lowered from the T-pose
-_ELBOW_FLEX = 22.0    # deg mean elbow flexion (+8 deg when the arm swings forward)
-
-
-def _catmull_rom(keys: torch.Tensor, phase: torch.Tensor) -> torch.Tensor:
-    """Periodic Catmull-Rom spline through N uniformly spaced keys (period 1). keys (N,), phase (...) -> (...)."""
-    n = keys.shape[0]
-    u = (phase - torch.floor(phase)) * n
-    i = torch.floor(u).long().clamp(0, n - 1)
-    t = u - i.to(u.dtype)
-    p0, p1, p2, p3 = (keys[(i + k) % n] for k in (-1, 0, 1, 2))
-    t2, t3 = t * t, t * t * t
-    return 0.5 * (2 * p1 + (p2 - p0) * t + (2 * p0 - 5 * p1 + 4 * p2 - p3) * t2 + (3 * p1 - p0 - 3 * p2 + p3) * t3)
-
-
-def _axis_quat(angle: torch.Tensor, axis: int) -> torch.Tensor:
-    """(...) angles about a coordinate axis -> (..., 4) quaternions (w, x, y, z)."""
-    h = 0.5 * angle
-    q = [torch.cos(h)] + [torch.zeros_like(h)] * 3
-    q[1 + axis] = torch.sin(h)
-    return torch.stack(q, dim=-1)
-
-
-def _quat_mul(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    aw, ax, ay, az = a.unbind(-1)
-    bw, bx, by, bz = b.unbind(-1)
-    return torch.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                        aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], dim=-1)
-
-
-def _quat_to_axis_angle(q: torch.Tensor) -> torch.Tensor:
-    """(..., 4) unit quaternions -> (..., 3) axis-angle, smooth through the identity (gradients included)."""
-    q = torch.where(q[..., :1] < 0, -q, q)
-    w, v = q[..., 0], q[..., 1:]
-    n2 = (v * v).sum(-1)
-    small = n2 < 1e-12
-    n = torch.sqrt(torch.where(small, torch.ones_like(n2), n2))
-    factor = torch.where(small, 2.0 / w * (1.0 - n2 / (3.0 * w * w)), 2.0 * torch.atan2(n, w) / n)
-    return v * factor[..., None]
-
-
-def _euler_to_axis_angle(euler: dict, order: str, like: torch.Tensor) -> torch.Tensor:
-    """{'x','y','z': (...) radians or None} composed intrinsically in `order` (as scipy's upper case) -> (..., 3)."""
-    q = None
-    for a in order:
-        ang = euler.get(a.lower())
-        if ang is None:
-            continue
-        qa = _axis_quat(ang, "XYZ".index(a))
-        q = qa if q is None else _quat_mul(q, qa)
-    if q is None:
-        return torch.zeros(*like.shape, 3, dtype=like.dtype, device=like.device)
-    return _quat_to_axis_angle(q)
-
-
-def _curve(name: str, phase: torch.Tensor) -> torch.Tensor:
-    keys = torch.as_tensor(_KEYS[name], dtype=phase.dtype, device=phase.device)
-    return _catmull_rom(keys, phase)
-
-
-def _cycle(phase: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """walk_cycle with the pelvis rotation as a quaternion (w, x, y, z): (...) -> (..., 4), (..., 69)."""
-    if not torch.is_tensor(phase) or not phase.is_floating_point():
-        raise ValueError(f"phase must be a floating-point tensor, got {type(phase).__name__}"
-                         + (f" of {phase.dtype}" if torch.is_tensor(phase) else ""))
-    if not torch.isfinite(phase).all():
-        raise ValueError("phase contains NaN or Inf.")
-    deg = math.pi / 180.0
-    two_pi = 2 * math.pi
-    angles: dict[str, dict[str, torch.Tensor]] = {}
-    pelvis_tilt_x = (_PELVIS_TILT + 1.0 * torch.cos(2 * two_pi * phase)) * deg
-    for side, shift, mirror in (("left", 0.0, 1.0), ("right", 0.5, -1.0)):
-        p = phase - shift
-        hip = _curve("hip_flex", p) * _STRIDE_GAIN
-        knee = _curve("knee_flex", p)
-        # SMPL x-rotations of the leg chain add up in the sagittal plane: hip x = -flexion, knee x = +flexion,
-        # ankle/toe x = plantarflexion; the foot's pitch to the floor is pelvis_x + hip_x + knee_x + ankle_x.
-        hip_x, knee_x = -hip * deg, knee * deg
-        pitch = _curve("foot_pitch", p) * deg
-        rule = _curve("stance_rule", p).clamp(0.0, 1.0)
-        ankle_x = rule * (pitch - pelvis_tilt_x - hip_x - knee_x) + (1 - rule) * _curve("ankle_swing", p) * deg
-        angles[f"{side}_hip"] = {"x": hip_x, "z": mirror * _curve("hip_abd", p) * deg}
-        angles[f"{side}_knee"] = {"x": knee_x}
-        angles[f"{side}_ankle"] = {"x": ankle_x}
-        angles[f"{side}_foot"] = {"x": -_curve("toe_ext", p) * deg}
-        # arms: this side's arm swings forward (x < 0) while this side's leg is back (phase 0.5)
-        swing = torch.cos(two_pi * p)
-        angles[f"{side}_shoulder"] = {"x": _ARM_SWING * swing * deg, "z": torch.full_like(phase, -mirror * _ARM_LOWER * deg)}
-        angles[f"{side}_elbow"] = {"y": -mirror * (_ELBOW_FLEX - 8.0 * swing) * deg}
-    c = torch.cos(two_pi * phase)
-    pelvis_yaw = -_PELVIS_YAW * c * deg                     # left side of the pelvis forward at left heel strike
-    pelvis_roll = _PELVIS_ROLL * torch.sin(two_pi * (phase + 0.1)) * deg   # the swing side drops
-    thorax_yaw = _THORAX_YAW * c * deg                      # the chest counter-rotates against the pelvis
-    for j in ("spine1", "spine2", "spine3"):   # the spine undoes the pelvis tilt and roll (3 joints), leans forward
-        angles[j] = {"x": (_TRUNK_LEAN * deg - pelvis_tilt_x) / 3.0, "y": (thorax_yaw - pelvis_yaw) / 3.0, "z": -pelvis_roll / 3.0}
-    angles["neck"] = {"y": -0.5 * thorax_yaw}               # the head keeps looking along the path
-    angles["head"] = {"y": -0.5 * thorax_yaw}
-    pose = []
-    for name in SMPL_JOINT_NAMES[1:]:
-        pose.append(_euler_to_axis_angle(angles.get(name, {}), _EULER_ORDER[name], phase))
-    body_pose = torch.cat(pose, dim=-1)
-    q = _quat_mul(_quat_mul(_axis_quat(pelvis_yaw, 1), _axis_quat(pelvis_tilt_x, 0)), _axis_quat(pelvis_roll, 2))
-    return q, body_pose
-
-
-def walk_cycle(phase: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """The periodic walk cycle: pelvis rotation (without heading) and body_pose at a gait phase (cycles).
-
-    Periodic with period 1 (phase p and p + 1 give the same pose), smooth in the phase (C1 keyframe splines).
-    Left heel strike at 0, right heel strike at 0.5.
-
-    Shape: phase (...) -> (pelvis_orient (..., 3), body_pose (..., 69)), axis-angle.
-    Example:
-        >>> orient, pose = walk_cycle(torch.linspace(0, 1, 31))     # (31, 3), (31, 69)
-    """
-    q, body_pose = _cycle(phase)
-    return _quat_to_axis_angle(q), body_pose
-
-
-def _smoothstep(x: torch.Tensor) -> torch.Tensor:
-    x = x.clamp(0.0, 1.0)
-    return x * x * (3 - 2 * x)
-
-
-def anchor_weights(phase: torch.Tensor) -> torch.Tensor:
-    """Weights (left, right) of the feet in the foot lock: 1 for the only foot down, a smooth hand-over from the
-    trailing to the leading foot during double support (phase [0, 0.12] and [0.5, 0.62]). They sum to 1.
-
-    Shape: phase (...) -> (..., 2).
-    Example:
-        >>> anchor_weights(torch.tensor([0.3, 0.8]))   # tensor([[1., 0.], [0., 1.]])
-    """
-    p = phase - torch.floor(phase)
-    left = torch.where(p < 0.5, _smoothstep(p / DOUBLE_SUPPORT), 1.0 - _smoothstep((p - 0.5) / DOUBLE_SUPPORT))
-    return torch.stack([left, 1.0 - left], dim=-1)
-
-
-def stance_contacts(phase: torch.Tensor) -> torch.Tensor:
-    """Foot contact labels (left, right): the foot's stance interval of the cycle, heel strike to CONTACT_END
-    (left [0, 0.60), right [0.5, 1.10) mod 1). Shape: (...) -> (..., 2) bool."""
-    p = phase - torch.floor(phase)
-    q = (phase - 0.5) - torch.floor(phase - 0.5)
-    return torch.stack([p < CONTACT_END, q < CONTACT_END], dim=-1)
 
 
 # ------------------------------------------------------------------------------------------------ controls
@@ -295,22 +119,6 @@ def _interp_matrix(frames: int, primitives: int) -> np.ndarray:
             a = (t - centres[k]) / (centres[k + 1] - centres[k])
             W[t, k], W[t, k + 1] = 1.0 - a, a
     return W
-
-
-def _check(name: str, x, shape: tuple, like: torch.Tensor | None = None) -> torch.Tensor:
-    if not torch.is_tensor(x):
-        raise ValueError(f"{name} must be a torch.Tensor of shape {shape}, got {type(x).__name__}")
-    if x.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, x.shape)):
-        want = "(" + ", ".join("*" if s is None else str(s) for s in shape) + ")"
-        raise ValueError(f"{name} has shape {tuple(x.shape)}, expected {want}")
-    if not x.is_floating_point():
-        raise ValueError(f"{name} must be a floating-point tensor, got {x.dtype}")
-    if not torch.isfinite(x).all():
-        raise ValueError(f"{name} contains NaN or Inf; controls must be finite.")
-    if like is not None and (x.dtype != like.dtype or x.device != like.device):
-        raise ValueError(f"{name} is {x.dtype} on {x.device} but the body is {like.dtype} on {like.device}; "
-                         f"move one with .to(...).")
-    return x
 
 
 # ------------------------------------------------------------------------------------------------ the model
@@ -419,11 +227,11 @@ class WalkModel(torch.nn.Module):
         """
         like = self.body.v_template
         dt, dev = like.dtype, like.device
-        heading_delta = _check("heading_delta", heading_delta, (None, None), like)
+        heading_delta = check_tensor("heading_delta", heading_delta, (None, None), like)
         B, P = heading_delta.shape
         if B < 1 or P < 1:
             raise ValueError(f"heading_delta has shape {(B, P)}: need at least one sequence and one primitive.")
-        speed = _check("speed", speed, (B, P), like)
+        speed = check_tensor("speed", speed, (B, P), like)
         if (speed < 0).any():
             raise ValueError("speed must be >= 0 m/s (the model walks forwards only; turn with heading_delta).")
         T = num_frames(P) if frames is None else int(frames)
@@ -436,16 +244,16 @@ class WalkModel(torch.nn.Module):
             raise ValueError(f"phase0 must be finite, got {phase0}")
         if pose_residual is None:
             pose_residual = torch.zeros(B, T, 69, dtype=dt, device=dev)
-        pose_residual = _check("pose_residual", pose_residual, (B, T, 69), like)
-        start = torch.zeros(B, 2, dtype=dt, device=dev) if start is None else _check("start", start, (B, 2), like)
+        pose_residual = check_tensor("pose_residual", pose_residual, (B, T, 69), like)
+        start = torch.zeros(B, 2, dtype=dt, device=dev) if start is None else check_tensor("start", start, (B, 2), like)
         heading0 = (torch.zeros(B, dtype=dt, device=dev) if heading0 is None
-                    else _check("heading0", heading0, (B,), like))
+                    else check_tensor("heading0", heading0, (B,), like))
         nb = self.body.num_betas
         if betas is None:
             betas = torch.zeros(B, nb, dtype=dt, device=dev)
         if torch.is_tensor(betas) and betas.ndim == 1:
             betas = betas[None].expand(B, -1)
-        betas = _check("betas", betas, (B, nb), like)
+        betas = check_tensor("betas", betas, (B, nb), like)
 
         # path: per-frame speed and turn rate, interpolated between primitive centres
         W = torch.as_tensor(_interp_matrix(T, P), dtype=dt, device=dev)            # (T, P)
@@ -458,9 +266,9 @@ class WalkModel(torch.nn.Module):
         phase = phase0 + dist / stride[:, None]
 
         # pose: the cycle + residuals; heading composed with the cycle's pelvis rotation
-        pelvis_q, cycle = _cycle(phase)                                            # (B, T, 4), (B, T, 69)
+        pelvis_q, cycle = walk_cycle_quat(phase)                                   # (B, T, 4), (B, T, 69)
         body_pose = cycle + pose_residual
-        global_orient = _quat_to_axis_angle(_quat_mul(_axis_quat(heading, 1), pelvis_q))
+        global_orient = quat_to_axis_angle(quat_mul(axis_quat(heading, 1), pelvis_q))
 
         joints, verts, feet, sole = self._pose(betas[:, None].expand(B, T, -1).reshape(B * T, -1),
                                                global_orient.reshape(B * T, 3), body_pose.reshape(B * T, 69))
@@ -477,106 +285,3 @@ class WalkModel(torch.nn.Module):
         return Walk(betas=betas, global_orient=global_orient, body_pose=body_pose, transl=transl,
                     contacts=stance_contacts(phase), phase=phase, heading=heading, joints=joints + transl[:, :, None],
                     vertices=verts + transl[:, :, None], stride=stride)
-
-
-# ------------------------------------------------------------------------------------------------ objective terms
-def pose_prior(pose_residual: torch.Tensor, smooth_weight: float = 10.0) -> torch.Tensor:
-    """Quadratic prior on the pose residuals: mean squared residual + smooth_weight x mean squared change per frame.
-
-    0 for the bare walk cycle; penalises large and jittery deviations from it.
-
-    Shape: (B, T, 69) -> (B,).
-    Example:
-        >>> pose_prior(torch.zeros(2, 98, 69))     # tensor([0., 0.])
-    """
-    _check("pose_residual", pose_residual, (None, None, 69))
-    mag = (pose_residual ** 2).sum(-1).mean(-1)
-    if pose_residual.shape[1] < 2:
-        return mag
-    d = pose_residual[:, 1:] - pose_residual[:, :-1]
-    return mag + smooth_weight * (d ** 2).sum(-1).mean(-1)
-
-
-def jerk(joints: torch.Tensor, weight: float = JERK_WEIGHT) -> torch.Tensor:
-    """DartControl's jerk term: weight x the maximum over frames and joints of the norm of the joints' third finite
-    difference (metres per frame^3, no fps scaling, as DartControl's calc_jerk); weight 0.1 is the objective's.
-    DartControl's loss is the batch mean of this; weight=1 gives the bare maximum jerk.
-
-    Shape: (B, T, J, 3) with T >= 4 -> (B,).
-    Example:
-        >>> jerk(walk.joints)          # (B,)
-    """
-    _check("joints", joints, (None, None, None, 3))
-    if joints.shape[1] < 4:
-        raise ValueError(f"jerk needs at least 4 frames, got joints of shape {tuple(joints.shape)}")
-    j3 = joints[:, 3:] - 3 * joints[:, 2:-1] + 3 * joints[:, 1:-2] - joints[:, :-3]
-    return weight * j3.norm(dim=-1).amax(dim=(1, 2))
-
-
-def foot_skate(joints: torch.Tensor, contacts: torch.Tensor, foot_joints: tuple[int, int] = FOOT_JOINTS) -> torch.Tensor:
-    """Foot skating, cm: the mean horizontal (x, z) displacement per frame of each foot joint over the frame pairs
-    where that foot is in contact in both frames (0 where there are none).
-
-    Args:
-        joints: (B, T, J, 3) world joints (Y up, metres); contacts: (B, T, 2) bool or {0, 1} (left, right);
-        foot_joints: the joint of each foot, default the balls ('left_foot', 'right_foot').
-
-    Shape: (B, T, J, 3), (B, T, 2) -> (B,).
-    Example:
-        >>> foot_skate(walk.joints, walk.contacts)   # (B,) cm per frame
-    """
-    _check("joints", joints, (None, None, None, 3))
-    B, T = joints.shape[:2]
-    if not torch.is_tensor(contacts) or tuple(contacts.shape) != (B, T, 2):
-        raise ValueError(f"contacts must be a (B, T, 2) = {(B, T, 2)} tensor, got "
-                         f"{tuple(contacts.shape) if torch.is_tensor(contacts) else type(contacts).__name__}")
-    if T < 2:
-        raise ValueError(f"foot_skate needs at least 2 frames, got {T}")
-    c = contacts.to(joints.dtype)
-    feet = joints[:, :, list(foot_joints)][..., [0, 2]]                 # (B, T, 2, 2)
-    slide = (feet[:, 1:] - feet[:, :-1]).norm(dim=-1)                   # (B, T-1, 2)
-    both = c[:, 1:] * c[:, :-1]
-    n = both.sum((1, 2))
-    return 100.0 * (slide * both).sum((1, 2)) / n.clamp(min=1.0)
-
-
-# ------------------------------------------------------------------------------------------------ pictures
-def render_strip(walk: Walk, faces, path=None, every: int = 10, sequence: int = 0, size: int = 360,
-                 yaw: float = 90.0, pitch: float = 10.0, extent: float = 2.2):
-    """Side view of every `every`-th frame of one sequence, side by side (one tile per frame, the camera following
-    the pelvis, one scale), with a floor grid of dots every 10 cm (fixed in the world, so a sliding foot shows as a
-    foot moving against the dots) and the contact feet's balls in red.
-
-    Shape: -> (size, n * size, 3) uint8 RGB; written as PNG where `path` is given.
-    Example:
-        >>> render_strip(model(*straight_controls(1, 12)), body.faces, "walk_strip.png")
-    """
-    import cv2
-
-    from volsmpl.render import render_scene, save_png
-    if every < 1:
-        raise ValueError(f"every must be >= 1, got {every}")
-    V = walk.vertices[sequence].detach().cpu().double().numpy()
-    Jt = walk.joints[sequence].detach().cpu().double().numpy()
-    C = walk.contacts[sequence].detach().cpu().numpy()
-    faces = np.asarray(faces)
-    lo, hi = Jt[:, 0, [0, 2]].min(0) - 1.2, Jt[:, 0, [0, 2]].max(0) + 1.2
-    gx, gz = np.meshgrid(np.arange(lo[0], hi[0], 0.1), np.arange(lo[1], hi[1], 0.1))
-    grid = np.stack([gx.ravel(), np.zeros(gx.size), gz.ravel()], 1)
-    near = np.linalg.norm(grid[:, None, [0, 2]] - Jt[None, :, 0, [0, 2]], axis=-1).min(1) < 0.3
-    grid = grid[near]                                    # a band of floor dots along the path
-    tiles = []
-    for t in range(0, V.shape[0], every):
-        feet = Jt[t, list(FOOT_JOINTS)][C[t]]
-        pts = np.concatenate([grid, feet]) if len(feet) else grid
-        cols = np.concatenate([np.tile((0.55, 0.55, 0.55), (len(grid), 1)), np.tile((0.9, 0.1, 0.1), (len(feet), 1))])
-        centre = np.array([Jt[t, 0, 0], 0.85, Jt[t, 0, 2]])
-        img = render_scene([(V[t], faces, (0.85, 0.65, 0.5))], size=size, yaw=yaw, pitch=pitch, extent=extent,
-                           center=centre, points=pts, point_colors=cols, point_radius=2, max_edge=None)
-        cv2.putText(img, f"t={t} ph={walk.phase[sequence, t].item():.2f}", (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
-                    (20, 20, 20), 1, cv2.LINE_AA)
-        tiles.append(img)
-    strip = np.concatenate(tiles, axis=1)
-    if path is not None:
-        save_png(path, strip)
-    return strip
