@@ -25,7 +25,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from volsmpl import paper as _paper
 from volsmpl import report_sections as rs
 from volsmpl.outputs import check_writable, write_atomic
 

@@ -190,10 +190,10 @@ def run(args) -> int:
     budget = args.mem_budget_gb * 2 ** 30
     sc0 = scenes[0]
     s0, g0 = sc0.pairs[0]
-    from .synth import initial_controls, _speed
+    from .synth import initial_controls, speed_of_control
     init = initial_controls(s0, g0, frames, body.v_template.dtype, body.v_template.device)
     with torch.no_grad():
-        probe = model(init["heading_delta"], _speed(init["speed_u"]), frames=frames, start=init["start"],
+        probe = model(init["heading_delta"], speed_of_control(init["speed_u"]), frames=frames, start=init["start"],
                       heading0=init["heading0"])
     costs, coll_frames = {}, {}
     for m in models:   # the per-frame cost on the full cloud, on the straight walk of the first pair

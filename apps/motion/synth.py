@@ -50,11 +50,13 @@ class SynthConfig:
     device: str = "cpu"
 
 
-def _speed(u: torch.Tensor) -> torch.Tensor:
+def speed_of_control(u: torch.Tensor) -> torch.Tensor:
+    """Walking speed (m/s) of the unbounded speed control: a sigmoid onto [SPEED_LO, SPEED_HI]."""
     return SPEED_LO + (SPEED_HI - SPEED_LO) * torch.sigmoid(u)
 
 
-def _speed_inv(s: float) -> float:
+def control_of_speed(s: float) -> float:
+    """The inverse of speed_of_control (speeds outside the range are brought just inside it)."""
     x = min(max((s - SPEED_LO) / (SPEED_HI - SPEED_LO), 1e-3), 1 - 1e-3)
     return math.log(x / (1 - x))
 
@@ -66,7 +68,7 @@ def initial_controls(start, goal, frames: int, dtype=torch.float32, device="cpu"
     P = W.num_primitives(frames)
     speed = float(np.linalg.norm(d)) / ((frames - 1) / W.FPS)
     return {"heading_delta": torch.zeros(1, P, dtype=dtype, device=device),
-            "speed_u": torch.full((1, P), _speed_inv(speed), dtype=dtype, device=device),
+            "speed_u": torch.full((1, P), control_of_speed(speed), dtype=dtype, device=device),
             "heading0": torch.tensor([math.atan2(d[0], d[1])], dtype=dtype, device=device),
             "start": torch.as_tensor(start[None], dtype=dtype, device=device)}
 
@@ -98,7 +100,7 @@ def synthesize(model: W.WalkModel, volume, scene, start, goal, w: float = 1.0, c
         variables["residual"] = Variable(torch.zeros(1, T, 69, dtype=like.dtype, device=like.device), lr=cfg.residual_lr)
 
     def prepare(s):
-        return {"walk": model(s.heading_delta, _speed(s.speed_u), s.get("residual"), frames=T, start=init["start"],
+        return {"walk": model(s.heading_delta, speed_of_control(s.speed_u), s.get("residual"), frames=T, start=init["start"],
                               heading0=init["heading0"])}
 
     terms = {"goal": Term(lambda s: goal_loss(s.walk.joints[:, -1, 0], goal_t), 1.0),
@@ -113,7 +115,7 @@ def synthesize(model: W.WalkModel, volume, scene, start, goal, w: float = 1.0, c
     wall = time.perf_counter() - t0
     v = res.variables
     with torch.no_grad():
-        walk = model(v["heading_delta"], _speed(v["speed_u"]), v.get("residual"), frames=T, start=init["start"],
+        walk = model(v["heading_delta"], speed_of_control(v["speed_u"]), v.get("residual"), frames=T, start=init["start"],
                      heading0=init["heading0"])
     metrics = evaluate(walk, model.body.faces, scene, goal)
     summ = res.summary()
