@@ -20,11 +20,10 @@ from .groundtruth import closed_mesh_problems
 from .mesh_distance import mesh_signed_distance
 from .nn.analytic import box_sdf
 from .partition import Partition
-from .self_penetration import overlap_samples, reduce_selfpen
+from .self_penetration import SELFPEN_TAU, overlap_samples, reduce_selfpen, sdf_penalty
 from .validate import check_points
 from .volume_api import BodyVolume, check_output
 
-SELFPEN_TAU = 0.01  # metres, as Volume.selfpen_loss
 
 
 class MeshVolume(BodyVolume):
@@ -105,7 +104,7 @@ class MeshVolume(BodyVolume):
         return reduce_selfpen(part, part < 0, mask, samples, self.selfpen_penalty(tau), return_points)
 
     def selfpen_penalty(self, tau: float = SELFPEN_TAU):
-        return lambda part, inv: (torch.sigmoid(-part / tau) * inv).sum()
+        return sdf_penalty(tau)
 
     @torch.no_grad()
     def extract_mesh(self, out, resolution: int = 128, body_index: int = 0, padding: float = 0.05):

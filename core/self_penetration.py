@@ -14,7 +14,9 @@ import torch
 
 from .boxes import boxes_overlap, sample_overlaps
 
-__all__ = ["overlap_samples", "reduce_selfpen"]
+__all__ = ["SELFPEN_TAU", "overlap_samples", "reduce_selfpen", "sdf_penalty"]
+
+SELFPEN_TAU = 0.01  # metres: SDF scale of the soft occupancy of signed-distance kinds (sdf_penalty)
 
 
 def overlap_samples(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor, mask: torch.Tensor,
@@ -44,6 +46,11 @@ def overlap_samples(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tenso
     for b, s in enumerate(samples):
         padded[b, : s.shape[0]] = s
     return overl, samples, padded
+
+
+def sdf_penalty(tau: float = SELFPEN_TAU):
+    """The penalty of signed-distance kinds: sum over kept samples and involved parts of sigmoid(-d_k(x) / tau)."""
+    return lambda part, inv: (torch.sigmoid(-part / tau) * inv).sum()
 
 
 def reduce_selfpen(part: torch.Tensor, occupied: torch.Tensor, mask: torch.Tensor, samples: list, penalty,

@@ -26,11 +26,10 @@ from .models import kind_of_network
 from .nn.analytic import box_sdf
 from .nn.volsmpl_net import PartCode
 from .partition import Partition
-from .self_penetration import overlap_samples, reduce_selfpen
+from .self_penetration import SELFPEN_TAU, overlap_samples, reduce_selfpen, sdf_penalty
 from .validate import check_points
 from .volume_api import BodyVolume, check_output
 
-SELFPEN_TAU = 0.01  # metres: SDF scale of the self-penetration loss's soft occupancy (Volume.selfpen_loss)
 
 
 @dataclass
@@ -382,7 +381,7 @@ class Volume(BodyVolume):
     def selfpen_penalty(self, tau: float = SELFPEN_TAU):
         """penalty(part (K, n), involved (K, n)) -> scalar of one body's kept samples (selfpen_loss)."""
         if self.is_sdf:
-            return lambda part, inv: (torch.sigmoid(-part / tau) * inv).sum()
+            return sdf_penalty(tau)
 
         def occupancy_penalty(part, inv):
             keep = inv.any(dim=0)
