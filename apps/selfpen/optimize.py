@@ -171,6 +171,8 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
     """
     check_case(case)
     dev = torch.device(cfg.device)
+    if dev.type == "cuda" and dev.index is None and torch.cuda.is_available():
+        dev = torch.device("cuda", torch.cuda.current_device())  # 'cuda' names the current GPU: compare as cuda:N
     before = body_collisions(body, case.betas, case.global_orient, case.body_pose)
     res = RepairResult(name=case.name, status="no_intersection", iterations=0,
                        collisions_before=len(before["pairs"]), raw_before=len(before["raw"]))
