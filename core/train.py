@@ -42,19 +42,20 @@ on a GPU machine the exact ground truth (CPU) would otherwise starve the GPU. Ch
 (model + optimiser, safetensors; nothing pickled) are written to <out>/ckpt-<step>/ and published by
 atomically replacing <out>/latest; <out>/log.csv holds the losses. Multi-process: torchrun (DDP, gloo on
 CPU, nccl on CUDA).
+
+This module holds the losses, the step, checkpointing/resume, the loop and the CLI; the configuration is in
+`volsmpl.train_config` (TrainConfig, lr_at), the data in `volsmpl.train_batches` (make_batch, batch_stream).
 """
 from __future__ import annotations
 
 import copy
 import csv
-import dataclasses
 import json
 import math
 import os
 import shutil
 import sys
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -63,105 +64,10 @@ import torch.distributed as dist
 
 from .attach import attach_volume
 from .body.model import create_body
-from .body.poses import check_pose_mode, sample_poses
-from .body.shapes import sample_betas
 from .checkpoint import load_checkpoint, save_checkpoint
-from .groundtruth import SIGN_MODES, batch_mesh_sdf
-from .models import learned_models, model_kind
-from .nn.config import VolumeConfig
-from .training_queries import sample_training_queries
-
-
-@dataclass
-class TrainConfig:
-    """Training hyperparameters (paper values as defaults where the paper gives them)."""
-
-    steps: int = 450_000            # paper: 15 epochs = 450k iterations
-    batch_size: int = 8             # paper: 8
-    lr: float = 1e-4                # paper: 1e-4 annealed to 1e-5
-    lr_final: float = 1e-5
-    anneal_start: int = 0           # step at which the annealing from lr starts (a fine-tuning phase after --init)
-    ema_decay: float = 0.0          # > 0: keep an exponential moving average of the weights; checkpoints' model is the EMA
-    n_uniform: int = 256            # per part, uniform in its padded box (paper)
-    n_surface: int = 256            # per part, near the surface (paper)
-    surface_sigma: tuple = (0.01, 0.05)  # metres; see volsmpl.groundtruth
-    n_body_surface: int = 0         # per body, near the whole surface, area-weighted (the eval's near-surface law)
-    body_surface_sigma: tuple = (0.005, 0.01)  # metres, offsets of those
-    sign_tau: float = 0.01          # metres: scale of the sign term (STE gradient 1/tau; logistic logit -d/tau)
-    sign_loss: str = "ste"          # 'ste' (eq. 3's l2 of signs, straight-through) or 'logistic' (module docstring)
-    sign_weight: float = 1.0        # weight of the sign term
-    abs_weight: float = 1e4         # |SDF| term in cm^2
-    residual: str = "signed"        # distance term: 'signed' (d~ - d)^2 or 'abs' (|d~| - |d|)^2 (eq. 3 literally)
-    pose_mode: str = "realistic"    # training poses: 'realistic', 'extreme' or 'mixed' (volsmpl.body.poses.sample_euler)
-    extreme_fraction: float = 0.5   # pose_mode 'mixed': share of bodies with extreme poses
-    global_orient_scale: float = 0.0  # rad sd of random global orientation (parts are in local frames anyway)
-    gt_sign: str = "ray_winding"    # ground-truth sign: winding number (self-overlaps inside) counted along rays
-                                    # ('ray_winding', exact, fastest), or libigl's 'fast_winding' / 'winding'; or 'raycast' parity
-    gt_rays: int = 3                # rays of the vote for gt_sign='ray_winding' / 'raycast' (odd)
-    micro_batch: int = 2            # bodies per forward/backward; gradients accumulate to the same full-batch step
-    encoder_bf16: bool = False      # bfloat16 autocast of the PointNet encoder (CPU speed; see VolumetricSMPLNet)
-    seed: int = 0
-    ckpt_every: int = 200
-    log_every: int = 10
-    keep_ckpts: int = 2
-    num_threads: int = 0            # torch CPU threads (0: leave torch's default)
-    num_workers: int = 0            # processes that make batches ahead of the step (0: in the training process)
-    model_kind: str = "volsmpl"     # 'volsmpl' (SDF, eq. 3) or 'coap' (occupancy baseline, binary cross-entropy)
-    model: object = field(default_factory=VolumeConfig)  # VolumeConfig, or CoapConfig for model_kind 'coap'
-
-    def __post_init__(self):
-        if self.gt_sign not in SIGN_MODES:
-            raise ValueError(f"gt_sign must be one of {SIGN_MODES}, got {self.gt_sign!r}")
-        if self.num_workers < 0:
-            raise ValueError(f"num_workers must be >= 0 (0 makes batches in the training process), got {self.num_workers}")
-        if not 0.0 <= self.ema_decay < 1.0:
-            raise ValueError(f"ema_decay must be in [0, 1) (0 turns the average off), got {self.ema_decay}")
-        if not 0 <= self.anneal_start < self.steps:
-            raise ValueError(f"anneal_start must be in [0, steps={self.steps}), got {self.anneal_start}")
-        if self.sign_loss not in ("ste", "logistic"):
-            raise ValueError(f"sign_loss must be 'ste' or 'logistic', got {self.sign_loss!r}")
-        if not (self.sign_tau > 0 and self.sign_weight >= 0):
-            raise ValueError(f"sign_tau={self.sign_tau} must be > 0 (metres) and sign_weight={self.sign_weight} >= 0.")
-        check_pose_mode(self.pose_mode, self.extreme_fraction)
-        if self.residual not in ("signed", "abs"):
-            raise ValueError(f"residual must be 'signed' or 'abs', got {self.residual!r}")
-        if self.model_kind not in learned_models():
-            raise ValueError(f"model_kind must be one of {', '.join(learned_models())} (a network), got {self.model_kind!r}")
-        cls = model_kind(self.model_kind).config_class()
-        if not isinstance(self.model, cls):
-            if self.model != VolumeConfig():
-                raise ValueError(f"model_kind={self.model_kind!r} needs a {cls.__name__} as model, got a {type(self.model).__name__}.")
-            self.model = cls()
-
-    def to_dict(self) -> dict:
-        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
-        d["surface_sigma"] = list(self.surface_sigma)
-        d["body_surface_sigma"] = list(self.body_surface_sigma)
-        d["model"] = self.model.to_dict()
-        return d
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "TrainConfig":
-        d = dict(d)
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown training config key(s) {unknown}; valid keys: {sorted(known)}")
-        kind = d.get("model_kind", "volsmpl")
-        if kind not in learned_models():
-            raise ValueError(f"model_kind must be one of {', '.join(learned_models())} (a network), got {kind!r}")
-        if kind != "volsmpl" or "model" in d:
-            d["model"] = model_kind(kind).config_from_dict(d.get("model", {}))
-        for key in ("surface_sigma", "body_surface_sigma"):
-            if key in d:
-                d[key] = tuple(d[key])
-        return cls(**d)
-
-
-def lr_at(cfg: TrainConfig, step: int) -> float:
-    """Exponential annealing from lr (at step cfg.anneal_start and before) to lr_final (at cfg.steps)."""
-    t = (step - cfg.anneal_start) / (cfg.steps - cfg.anneal_start)
-    return cfg.lr * (cfg.lr_final / cfg.lr) ** min(1.0, max(0.0, t))
+from .models import model_kind
+from .train_batches import batch_stream
+from .train_config import TrainConfig, lr_at
 
 
 class WeightEMA:
@@ -218,60 +124,6 @@ def occupancy_loss(pred: torch.Tensor, gt: torch.Tensor) -> tuple[torch.Tensor, 
     bce = torch.nn.functional.binary_cross_entropy(pred.clamp(1e-6, 1 - 1e-6), target)
     return bce, {"sign": float(bce.detach()), "abs": 0.0}
 
-
-def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> dict:
-    """The training batch of (step, rank): body parameters, the posed bodies (vertices, joints, full_pose),
-    query points (B, N, 3), exact SDF (B, N)."""
-    seed = (cfg.seed * 1_000_003 + step) * 131 + rank
-    g = torch.Generator().manual_seed(seed)
-    B = cfg.batch_size
-    params = {
-        "betas": sample_betas(B, num_betas=body.num_betas, seed=seed),
-        "body_pose": sample_poses(B, seed=seed, mode=cfg.pose_mode, extreme_fraction=cfg.extreme_fraction),
-        "global_orient": torch.randn(B, 3, generator=g) * cfg.global_orient_scale,
-        "transl": torch.zeros(B, 3),
-    }
-    with torch.no_grad():
-        out = body(**params)
-        G = partition.part_transforms(out.full_pose, out.joints)
-        bmin, bmax = partition.boxes(out.vertices, G)
-        pts = sample_training_queries(out.vertices, body.faces_tensor, G, bmin, bmax, cfg.n_uniform, cfg.n_surface,
-                                      sigma=cfg.surface_sigma, face_ids_per_part=partition.tight_face_ids, generator=g,
-                                      n_body=cfg.n_body_surface, body_sigma=cfg.body_surface_sigma)
-        gt = batch_mesh_sdf(out.vertices, body.faces, pts, sign=cfg.gt_sign, nsamples=cfg.gt_rays, check_closed=False)
-    posed = {"vertices": out.vertices, "joints": out.joints, "full_pose": out.full_pose}
-    return {"params": params, "posed": posed, "points": pts, "sdf": gt, "seed": seed}
-
-
-class StepBatches(torch.utils.data.Dataset):
-    """Batch of step s (make_batch) as item s, for DataLoader worker processes. The body and a CPU copy of
-    the partition reach the workers by fork; every batch depends only on (seed, step, rank), so any number
-    of workers gives the batches of the serial loop, in order."""
-
-    def __init__(self, cfg: TrainConfig, body, partition, rank: int):
-        self.cfg, self.body, self.partition, self.rank = cfg, body, partition, rank
-
-    def __len__(self) -> int:
-        return self.cfg.steps
-
-    def __getitem__(self, step: int) -> dict:
-        return make_batch(self.cfg, self.body, self.partition, int(step), self.rank)
-
-
-def _one_thread(_worker_id: int) -> None:
-    torch.set_num_threads(1)
-
-
-def batch_stream(cfg: TrainConfig, body, partition, start: int, end: int, rank: int = 0):
-    """Iterator over the batches of steps start..end-1: made here (num_workers 0) or by worker processes
-    (one torch thread each, two batches ahead per worker)."""
-    if cfg.num_workers == 0 or end <= start:
-        return (make_batch(cfg, body, partition, s, rank) for s in range(start, end))
-    loader = torch.utils.data.DataLoader(
-        StepBatches(cfg, body, partition, rank), batch_size=None, sampler=range(start, end),
-        num_workers=cfg.num_workers, worker_init_fn=_one_thread, prefetch_factor=2,
-        multiprocessing_context="fork", persistent_workers=False)
-    return iter(loader)
 
 
 class TrainStep(torch.nn.Module):

@@ -104,7 +104,7 @@ def test_smplx_package_loads_smpl_file(smpl):
 def test_smplx_package_loads_smplx_file(tmp_path, smplx_arrays):
     torch = pytest.importorskip("torch")
     smplx = pytest.importorskip("smplx")
-    from volsmpl.body.anny_export import make_smplx_model_dir
+    from volsmpl.body.anny_files import make_smplx_model_dir
 
     V = smplx_arrays["v_template"].shape[0]
     m1 = smplx.SMPLX(model_path=str(SMPLX_FILE), use_pca=False)

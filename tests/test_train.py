@@ -13,7 +13,9 @@ import torch
 
 import volsmpl
 from volsmpl.nn.config import VolumeConfig
-from volsmpl.train import TrainConfig, TrainStep, _accumulate, lr_at, make_batch, sdf_loss, train
+from volsmpl.train import TrainStep, _accumulate, sdf_loss, train
+from volsmpl.train_batches import make_batch
+from volsmpl.train_config import TrainConfig, lr_at
 
 TINY = VolumeConfig(latent_dim=16, encoder_hidden=16, encoder_blocks=2, n_surface_samples=64, decoder_hidden=16, nbw_rank=2)
 

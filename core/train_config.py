@@ -1,0 +1,106 @@
+"""Training configuration of `volsmpl train`: TrainConfig (hyperparameters, their validation,
+JSON round trip via to_dict/from_dict) and the learning-rate schedule lr_at.
+
+The loss terms these fields control are described in `volsmpl.train`'s module docstring.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+from .body.poses import check_pose_mode
+from .groundtruth import SIGN_MODES
+from .models import learned_models, model_kind
+from .nn.config import VolumeConfig
+
+
+@dataclass
+class TrainConfig:
+    """Training hyperparameters (paper values as defaults where the paper gives them)."""
+
+    steps: int = 450_000            # paper: 15 epochs = 450k iterations
+    batch_size: int = 8             # paper: 8
+    lr: float = 1e-4                # paper: 1e-4 annealed to 1e-5
+    lr_final: float = 1e-5
+    anneal_start: int = 0           # step at which the annealing from lr starts (a fine-tuning phase after --init)
+    ema_decay: float = 0.0          # > 0: keep an exponential moving average of the weights; checkpoints' model is the EMA
+    n_uniform: int = 256            # per part, uniform in its padded box (paper)
+    n_surface: int = 256            # per part, near the surface (paper)
+    surface_sigma: tuple = (0.01, 0.05)  # metres; see volsmpl.groundtruth
+    n_body_surface: int = 0         # per body, near the whole surface, area-weighted (the eval's near-surface law)
+    body_surface_sigma: tuple = (0.005, 0.01)  # metres, offsets of those
+    sign_tau: float = 0.01          # metres: scale of the sign term (STE gradient 1/tau; logistic logit -d/tau)
+    sign_loss: str = "ste"          # 'ste' (eq. 3's l2 of signs, straight-through) or 'logistic' (module docstring)
+    sign_weight: float = 1.0        # weight of the sign term
+    abs_weight: float = 1e4         # |SDF| term in cm^2
+    residual: str = "signed"        # distance term: 'signed' (d~ - d)^2 or 'abs' (|d~| - |d|)^2 (eq. 3 literally)
+    pose_mode: str = "realistic"    # training poses: 'realistic', 'extreme' or 'mixed' (volsmpl.body.poses.sample_euler)
+    extreme_fraction: float = 0.5   # pose_mode 'mixed': share of bodies with extreme poses
+    global_orient_scale: float = 0.0  # rad sd of random global orientation (parts are in local frames anyway)
+    gt_sign: str = "ray_winding"    # ground-truth sign: winding number (self-overlaps inside) counted along rays
+                                    # ('ray_winding', exact, fastest), or libigl's 'fast_winding' / 'winding'; or 'raycast' parity
+    gt_rays: int = 3                # rays of the vote for gt_sign='ray_winding' / 'raycast' (odd)
+    micro_batch: int = 2            # bodies per forward/backward; gradients accumulate to the same full-batch step
+    encoder_bf16: bool = False      # bfloat16 autocast of the PointNet encoder (CPU speed; see VolumetricSMPLNet)
+    seed: int = 0
+    ckpt_every: int = 200
+    log_every: int = 10
+    keep_ckpts: int = 2
+    num_threads: int = 0            # torch CPU threads (0: leave torch's default)
+    num_workers: int = 0            # processes that make batches ahead of the step (0: in the training process)
+    model_kind: str = "volsmpl"     # 'volsmpl' (SDF, eq. 3) or 'coap' (occupancy baseline, binary cross-entropy)
+    model: object = field(default_factory=VolumeConfig)  # VolumeConfig, or CoapConfig for model_kind 'coap'
+
+    def __post_init__(self):
+        if self.gt_sign not in SIGN_MODES:
+            raise ValueError(f"gt_sign must be one of {SIGN_MODES}, got {self.gt_sign!r}")
+        if self.num_workers < 0:
+            raise ValueError(f"num_workers must be >= 0 (0 makes batches in the training process), got {self.num_workers}")
+        if not 0.0 <= self.ema_decay < 1.0:
+            raise ValueError(f"ema_decay must be in [0, 1) (0 turns the average off), got {self.ema_decay}")
+        if not 0 <= self.anneal_start < self.steps:
+            raise ValueError(f"anneal_start must be in [0, steps={self.steps}), got {self.anneal_start}")
+        if self.sign_loss not in ("ste", "logistic"):
+            raise ValueError(f"sign_loss must be 'ste' or 'logistic', got {self.sign_loss!r}")
+        if not (self.sign_tau > 0 and self.sign_weight >= 0):
+            raise ValueError(f"sign_tau={self.sign_tau} must be > 0 (metres) and sign_weight={self.sign_weight} >= 0.")
+        check_pose_mode(self.pose_mode, self.extreme_fraction)
+        if self.residual not in ("signed", "abs"):
+            raise ValueError(f"residual must be 'signed' or 'abs', got {self.residual!r}")
+        if self.model_kind not in learned_models():
+            raise ValueError(f"model_kind must be one of {', '.join(learned_models())} (a network), got {self.model_kind!r}")
+        cls = model_kind(self.model_kind).config_class()
+        if not isinstance(self.model, cls):
+            if self.model != VolumeConfig():
+                raise ValueError(f"model_kind={self.model_kind!r} needs a {cls.__name__} as model, got a {type(self.model).__name__}.")
+            self.model = cls()
+
+    def to_dict(self) -> dict:
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
+        d["surface_sigma"] = list(self.surface_sigma)
+        d["body_surface_sigma"] = list(self.body_surface_sigma)
+        d["model"] = self.model.to_dict()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "TrainConfig":
+        d = dict(d)
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown training config key(s) {unknown}; valid keys: {sorted(known)}")
+        kind = d.get("model_kind", "volsmpl")
+        if kind not in learned_models():
+            raise ValueError(f"model_kind must be one of {', '.join(learned_models())} (a network), got {kind!r}")
+        if kind != "volsmpl" or "model" in d:
+            d["model"] = model_kind(kind).config_from_dict(d.get("model", {}))
+        for key in ("surface_sigma", "body_surface_sigma"):
+            if key in d:
+                d[key] = tuple(d[key])
+        return cls(**d)
+
+
+def lr_at(cfg: TrainConfig, step: int) -> float:
+    """Exponential annealing from lr (at step cfg.anneal_start and before) to lr_final (at cfg.steps)."""
+    t = (step - cfg.anneal_start) / (cfg.steps - cfg.anneal_start)
+    return cfg.lr * (cfg.lr_final / cfg.lr) ** min(1.0, max(0.0, t))
