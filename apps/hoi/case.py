@@ -199,16 +199,22 @@ def save_case(case: HoiCase, path) -> None:
     os.replace(tmp, path)
 
 
-def object_mesh(case: HoiCase):
-    """The object's mesh in its own frame (metres) and its regions {name: face ids} (empty for a mesh file).
-
-    A mesh file must hold triangles with finite vertices; its units are converted by `units`."""
-    import trimesh
-
+def object_template(case: HoiCase):
+    """The case's object template (volsmpl.scene.objects.ObjectTemplate), or None when the case names a mesh file."""
     from volsmpl.scene.objects import make_object
 
+    return make_object(case.category, seed=case.template_seed) if case.mesh_path is None else None
+
+
+def object_mesh(case: HoiCase, template=None):
+    """The object's mesh in its own frame (metres) and its regions {name: face ids} (empty for a mesh file).
+
+    template: the case's object_template when already built. A mesh file must hold triangles with finite
+    vertices; its units are converted by `units`."""
+    import trimesh
+
     if case.mesh_path is None:
-        tmpl = make_object(case.category, seed=case.template_seed)
+        tmpl = template if template is not None else object_template(case)
         return tmpl.mesh, dict(tmpl.regions)
     p = Path(case.mesh_path)
     if not p.is_absolute() and case.source is not None:

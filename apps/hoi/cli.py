@@ -135,10 +135,11 @@ def run(args) -> int:
     volumes = _volumes(body, models, args.device)
     per_model = {m: [] for m in models}
     for i, case in enumerate(cases):
-        problems = {m: Problem(case, body, volumes[m], cfg) for m in models}
+        # one problem serves every kind: it reads only the body, the object and the partition they share
+        problem = Problem(case, body, volumes[models[0]], cfg)
         results = {}
         for m in models:
-            r = fit_case(case, body, volumes[m], cfg, problems[m])
+            r = fit_case(case, body, volumes[m], cfg, problem)
             per_model[m].append(r)
             results[m] = r
             a, b = r.after, r.before
@@ -147,7 +148,7 @@ def run(args) -> int:
                   f"{a.get('contact_cm', float('nan')):6.2f} cm  object {a.get('obj_trans_err_cm', float('nan')):6.2f} cm "
                   f"{a.get('obj_rot_err_deg', float('nan')):5.1f} deg")
         if i < args.render:
-            case_panel(out / f"case_{case.name}.png", problems[models[0]], results)
+            case_panel(out / f"case_{case.name}.png", problem, results)
         # results so far, after every case: a long run stopped early still leaves its finished cases
         summary = {m: summarize(rs) for m, rs in per_model.items()}
         result = {

@@ -25,7 +25,7 @@ from volsmpl.mesh_distance import mesh_signed_distance
 from volsmpl.optim import Term, Variable, optimize
 from volsmpl.rotations import matrix_to_rotation_6d, rotation_6d_to_matrix
 
-from .case import ANY_REGION, HoiCase, Similarity, check_case, object_mesh
+from .case import ANY_REGION, HoiCase, Similarity, check_case, object_mesh, object_template
 from .losses import (contact_terms, keypoint_term, penetration, scale_prior, silhouette_term, to_body_frame,
                      to_camera)
 
@@ -86,11 +86,11 @@ class Problem:
 
     def __init__(self, case: HoiCase, body, volume, cfg: FitConfig):
         from volsmpl.body.fingerprint import fingerprint_of_model
-        from volsmpl.scene.objects import make_object
         from volsmpl.scene.points import sample_surface
 
         dev, dt = torch.device(cfg.device), torch.float32
-        mesh, regions = object_mesh(case)
+        tmpl = object_template(case)
+        mesh, regions = object_mesh(case, tmpl)
         if cfg.max_edge_frac > 0:  # an even spread of vertices over the surface (the paper's objects: 1k-20k vertices)
             import trimesh
             v, f = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, cfg.max_edge_frac * mesh.extents.max())
@@ -112,7 +112,6 @@ class Problem:
         self.obj_samples = torch.as_tensor(np.asarray(sample_surface(mesh, 4000, seed=0)[0]), dtype=dt, device=dev)[None]
         labels = volume.partition.vertex_labels.cpu().numpy()
         self.pairs = []  # (part vertex ids, region points (1, Q, 3), region normals (1, Q, 3)) in the object frame
-        tmpl = make_object(case.category, seed=case.template_seed) if case.mesh_path is None else None
         for part, region in case.contacts:
             ids = np.nonzero(labels == part_names.index(part))[0]
             ids = torch.as_tensor(ids[:: max(1, -(-len(ids) // cfg.part_points))], device=dev)
