@@ -123,3 +123,22 @@ def test_cli_fit_writes_results_and_figures(body, tmp_path, capsys):
     assert res["summary"]["volsmpl"]["n_cases"] == 1 and (tmp_path / "out" / "case_ball_at_hand.png").is_file()
     assert cli_main(["hoi", "fit", "--out", str(tmp_path / "o2")]) == 2
     assert "needs --case" in capsys.readouterr().err
+
+
+def test_resume_keeps_matching_records_and_refuses_other_settings(tmp_path):
+    import json
+
+    from volsmpl.apps.hoi.cli import resumed
+
+    key = {"config": {"iters": 1000, "lr": 0.002}, "models": ["volsmpl", "mesh"], "split": "test", "seed": 0}
+    rec = {"name": "sit_chair_0052", "ms_per_iter": 50.0}
+    path = tmp_path / "results.json"
+    assert resumed(path, key, key["models"]) == {"volsmpl": [], "mesh": []}  # nothing yet: start afresh
+    path.write_text(json.dumps({**key, "cases": {"volsmpl": [rec], "mesh": []}}))
+    got = resumed(path, key, key["models"])
+    assert [r.name for r in got["volsmpl"]] == ["sit_chair_0052"] and got["mesh"] == []
+    with pytest.raises(ValueError, match="config"):
+        resumed(path, {**key, "config": {"iters": 10, "lr": 0.002}}, key["models"])
+    path.write_text("{")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        resumed(path, key, key["models"])

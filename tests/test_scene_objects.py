@@ -117,3 +117,20 @@ def test_supports():
     boards = [s for s in shelf.supports() if s["name"] == "boards"]
     assert len(boards) >= 3  # bottom + at least two boards
     assert all(0 < s["height"] < shelf.extents[1] for s in boards)
+
+
+def test_rotation_error_modulo_symmetry():
+    from scipy.spatial.transform import Rotation
+
+    from volsmpl.scene import SYMMETRY, rotation_error_deg
+
+    R_true = Rotation.from_euler("xyz", [20, -35, 70], degrees=True).as_matrix()
+    spin = R_true @ Rotation.from_euler("y", 50, degrees=True).as_matrix()  # a turn about the object's own axis
+    tilt = R_true @ Rotation.from_euler("x", 25, degrees=True).as_matrix()
+    assert abs(rotation_error_deg(spin, R_true) - 50) < 1e-6
+    assert rotation_error_deg(spin, R_true, "axis_y") < 1e-4
+    assert abs(rotation_error_deg(tilt, R_true, "axis_y") - 25) < 1e-6
+    assert rotation_error_deg(tilt, R_true, "sphere") is None
+    assert SYMMETRY["ball"] == "sphere" and "cup" not in SYMMETRY  # the cup's handle breaks its symmetry
+    with pytest.raises(ValueError, match="symmetry"):
+        rotation_error_deg(tilt, R_true, "axis_z")

@@ -10,8 +10,9 @@ OUT/case_<name>.png for the first --render cases and OUT/summary.png.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
+from dataclasses import asdict, is_dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import torch
@@ -45,6 +46,9 @@ def add_parser(sub):
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     p.add_argument("--render", type=int, default=3, help="case figures for the first N cases (0: none)")
+    p.add_argument("--resume", action="store_true",
+                   help="keep the cases already in OUT/results.json (same config, models, split and seed) and fit "
+                        "only the others: a long run stopped early continues where it stopped")
     return p
 
 
@@ -82,6 +86,28 @@ def summarize(results: list) -> dict:
         out[key] = mean(key)
         out[key + "_before"] = mean(key, "before")
     return out
+
+
+def _record(r) -> dict:
+    """A case result as JSON-ready dict (a FitResult, or a record reloaded by --resume)."""
+    return asdict(r) if is_dataclass(r) else dict(vars(r))
+
+
+def resumed(path: Path, run_key: dict, models: list) -> dict:
+    """{model: [case records]} of an earlier results.json made with the same `run_key` (config, models, split,
+    seed); a clear error when it was made otherwise (nothing is mixed silently)."""
+    if not path.is_file():
+        return {m: [] for m in models}
+    try:
+        prev = json.loads(path.read_text())
+    except ValueError as e:
+        raise ValueError(f"--resume: {path} is not valid JSON ({e}); delete it or use another --out") from None
+    old = {k: prev.get(k) for k in run_key}
+    if json.loads(json.dumps(old)) != json.loads(json.dumps(run_key)):
+        diff = sorted(k for k in run_key if json.dumps(old[k], sort_keys=True) != json.dumps(run_key[k], sort_keys=True))
+        raise ValueError(f"--resume: {path} was made with other {', '.join(diff)}; run with the same settings, "
+                         f"or use another --out")
+    return {m: [SimpleNamespace(**d) for d in prev["cases"].get(m, [])] for m in models}
 
 
 def _volumes(body, models: list, device: str) -> dict:
@@ -133,8 +159,17 @@ def run(args) -> int:
             raise ValueError(f"no cases selected (split {args.split!r}, cases {args.cases!r})")
     body = volsmpl.create_body().to(args.device)
     volumes = _volumes(body, models, args.device)
-    per_model = {m: [] for m in models}
+    run_key = {"config": asdict(cfg), "models": models, "split": args.split, "seed": args.seed}
+    per_model = resumed(out / "results.json", run_key, models) if args.resume else {m: [] for m in models}
+    done = set.intersection(*({r.name for r in rs} for rs in per_model.values()))
+    for m in models:  # a case finished for some kinds only is fitted again for all
+        per_model[m] = [r for r in per_model[m] if r.name in done]
+    if done:
+        print(f"--resume: {len(done)} case(s) already in {out / 'results.json'}")
+    summary = {m: summarize(rs) for m, rs in per_model.items()}
     for i, case in enumerate(cases):
+        if case.name in done:
+            continue
         # one problem serves every kind: it reads only the body, the object and the partition they share
         problem = Problem(case, body, volumes[models[0]], cfg)
         results = {}
@@ -152,9 +187,8 @@ def run(args) -> int:
         # results so far, after every case: a long run stopped early still leaves its finished cases
         summary = {m: summarize(rs) for m, rs in per_model.items()}
         result = {
-            "config": asdict(cfg), "models": models, "split": args.split, "seed": args.seed,
-            "cases_requested": len(cases), "paper": paper.rows("hoi"), "summary": summary,
-            "cases": {m: [asdict(r) for r in rs] for m, rs in per_model.items()},
+            **run_key, "cases_requested": len(cases), "paper": paper.rows("hoi"), "summary": summary,
+            "cases": {m: [_record(r) for r in rs] for m, rs in per_model.items()},
             "figures": {"summary": "summary.png",
                         **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: min(i + 1, args.render)]}},
             "checkpoints": {m: (f"core/assets/{model_kind(m).checkpoint}" if model_kind(m).learned else None)

@@ -24,6 +24,7 @@ import torch
 from volsmpl.mesh_distance import mesh_signed_distance
 from volsmpl.optim import Term, Variable, optimize
 from volsmpl.rotations import matrix_to_rotation_6d, rotation_6d_to_matrix
+from volsmpl.scene import SYMMETRY, rotation_error_deg
 
 from .case import ANY_REGION, HoiCase, Similarity, check_case, object_mesh, object_template
 from .losses import (contact_terms, keypoint_term, penetration, scale_prior, silhouette_term, to_body_frame,
@@ -239,8 +240,8 @@ def case_metrics(problem: Problem, sim: dict) -> dict:
     ct = to_camera(c[None], *args(truth["object"]))[0, 0]
     cf = to_camera(c[None], *args(o))[0, 0]
     m["obj_trans_err_cm"] = float((cf - ct).norm() * 100)
-    rel = np.asarray(o.rotation).T @ np.asarray(truth["object"].rotation)
-    m["obj_rot_err_deg"] = float(np.degrees(np.arccos(np.clip((np.trace(rel) - 1) / 2, -1.0, 1.0))))
+    # modulo the category's symmetry (a bottle turned about its axis is not wrong; a ball has no rotation error)
+    m["obj_rot_err_deg"] = rotation_error_deg(o.rotation, truth["object"].rotation, SYMMETRY.get(problem.case.category))
     m["scale_err_pct"] = float(abs(o.scale / truth["object"].scale - 1) * 100)
     m["human_scale_err_pct"] = float(abs(h.scale / truth["human"].scale - 1) * 100)
     return m

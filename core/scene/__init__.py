@@ -2,7 +2,8 @@
 
 - `objects`: procedural object templates with real-world sizes (cup, bottle, box, ball, bat, phone, skateboard,
   laptop, backpack, suitcase, umbrella, chair, stool, table, sofa, bed, shelf, cart): `make_object`, the size
-  prior `SIZE_PRIOR`, named interaction regions (grasp, handle, seat, back, top, deck...), seats and supports.
+  prior `SIZE_PRIOR`, named interaction regions (grasp, handle, seat, back, top, deck...), seats and supports,
+  rotational symmetries `SYMMETRY` and the symmetry-aware `rotation_error_deg`.
 - `object_shapes`: the per-category procedural shape builders behind `make_object`.
 - `rooms`: procedural furnished rooms from an integer seed (`make_room`, `ROOM_COUNT` standard seeds) and the
   cached 16,384-point FPS scene cloud (`room_points`).
@@ -20,7 +21,8 @@ Rendering of scenes (several meshes, dots, camera views with keypoints) is in `v
 from .cache import cache_dir, cache_path, cached
 from .camera import (camera_center, camera_to_world, intrinsics_from_fov, look_at, make_camera, orbit_eye, project,
                      unproject, world_to_camera)
-from .objects import CATEGORIES, HANDHELD, REGIONS, SITTABLE, SIZE_PRIOR, ObjectTemplate, make_object
+from .objects import (CATEGORIES, HANDHELD, REGIONS, SITTABLE, SIZE_PRIOR, SYMMETRY, ObjectTemplate, make_object,
+                      rotation_error_deg)
 from .points import crop_cube, farthest_point_sample, sample_surface, subsample, to_torch
 from .room import GRID_CELL, Item, Room, Seat, Surface
 from .rooms import ROOM_COUNT, ROOM_KINDS, ROOM_VERSION, make_room, room_points
@@ -29,7 +31,8 @@ __all__ = [
     "cache_dir", "cache_path", "cached",
     "camera_center", "camera_to_world", "intrinsics_from_fov", "look_at", "make_camera", "orbit_eye", "project",
     "unproject", "world_to_camera",
-    "CATEGORIES", "HANDHELD", "REGIONS", "SITTABLE", "SIZE_PRIOR", "ObjectTemplate", "make_object",
+    "CATEGORIES", "HANDHELD", "REGIONS", "SITTABLE", "SIZE_PRIOR", "SYMMETRY", "ObjectTemplate", "make_object",
+    "rotation_error_deg",
     "crop_cube", "farthest_point_sample", "sample_surface", "subsample", "to_torch",
     "GRID_CELL", "ROOM_COUNT", "ROOM_KINDS", "ROOM_VERSION", "Item", "Room", "Seat", "Surface", "make_room",
     "room_points",

@@ -69,6 +69,32 @@ _TIED = {"ball": {"width": "height", "depth": "height"}, "bottle": {"depth": "wi
 #: objects a person picks up; the others are furniture standing on the floor
 HANDHELD = ("cup", "bottle", "box", "ball", "bat", "phone", "skateboard", "laptop", "backpack", "umbrella")
 SITTABLE = ("chair", "stool", "sofa", "bed")
+#: rotational symmetry of a category's shapes (object_shapes): 'sphere' (every rotation maps it onto itself) or
+#: 'axis_y' (any rotation about its canonical y axis does); categories left out have none
+SYMMETRY = {"ball": "sphere", "bottle": "axis_y", "bat": "axis_y"}
+
+
+def rotation_error_deg(R_est, R_true, symmetry: str | None = None) -> float | None:
+    """Angle (degrees) of the smallest rotation between two object orientations, modulo the object's symmetry:
+    the geodesic angle of R_est^T R_true without symmetry, the angle between the rotated y axes for 'axis_y',
+    None for 'sphere' (no orientation to get wrong).
+
+    Shape: R_est, R_true (3, 3) canonical -> world rotations.
+    Example:
+        >>> Rz = np.array([[0., -1, 0], [1, 0, 0], [0, 0, 1]])
+        >>> rotation_error_deg(np.eye(3), Rz), rotation_error_deg(np.eye(3), Rz, "axis_y")
+        (90.0, 90.0)
+    """
+    R_est, R_true = np.asarray(R_est, dtype=np.float64), np.asarray(R_true, dtype=np.float64)
+    if symmetry == "sphere":
+        return None
+    if symmetry == "axis_y":
+        c = float(np.clip(R_est[:, 1] @ R_true[:, 1], -1.0, 1.0))
+    elif symmetry is None:
+        c = float(np.clip((np.trace(R_est.T @ R_true) - 1) / 2, -1.0, 1.0))
+    else:
+        raise ValueError(f"symmetry must be None, 'sphere' or 'axis_y', got {symmetry!r}")
+    return float(np.degrees(np.arccos(c)))
 
 
 # --------------------------------------------------------------------------------------------- regions
