@@ -1,5 +1,6 @@
 """Rotation parametrisations for optimisation: the continuous 6D representation (Zhou et al., CVPR 2019)
-and axis-angle, to and from rotation matrices (axis-angle conversions by kornia).
+and axis-angle, to and from rotation matrices (kornia's conversions; matrix -> axis-angle through kornia's
+quaternion, with a gradient that stays finite at the identity).
 
     R = rotation_6d_to_matrix(r6)          # (..., 6) -> (..., 3, 3), always a rotation
     r6 = matrix_to_rotation_6d(R)          # the first two columns
@@ -7,7 +8,7 @@ and axis-angle, to and from rotation matrices (axis-angle conversions by kornia)
 from __future__ import annotations
 
 import torch
-from kornia.geometry.conversions import axis_angle_to_rotation_matrix, rotation_matrix_to_axis_angle
+from kornia.geometry.conversions import axis_angle_to_rotation_matrix, rotation_matrix_to_quaternion
 
 __all__ = ["rotation_6d_to_matrix", "matrix_to_rotation_6d", "axis_angle_to_matrix", "matrix_to_axis_angle",
            "axis_angle_to_rotation_6d", "rotation_6d_to_axis_angle"]
@@ -47,10 +48,19 @@ def axis_angle_to_matrix(aa: torch.Tensor) -> torch.Tensor:
 
 
 def matrix_to_axis_angle(R: torch.Tensor) -> torch.Tensor:
-    """Rotation matrix to axis-angle, angles in [0, pi]. Shape: (..., 3, 3) -> (..., 3)."""
+    """Rotation matrix to axis-angle, angles in [0, pi], through the unit quaternion (w >= 0); the gradient is
+    finite at the identity too (angle 2 atan2(|v|, w) / |v| -> 2 / w there), so poses can be optimised through
+    it. Shape: (..., 3, 3) -> (..., 3)."""
     if R.shape[-2:] != (3, 3):
         raise ValueError(f"rotation matrices must be (..., 3, 3), got shape {tuple(R.shape)}")
-    return rotation_matrix_to_axis_angle(R.reshape(-1, 3, 3)).reshape(*R.shape[:-2], 3)
+    q = rotation_matrix_to_quaternion(R.reshape(-1, 3, 3), eps=1e-12)  # (w, x, y, z)
+    sign = torch.where(q[:, :1] < 0, -1.0, 1.0).to(q.dtype)
+    w, v = q[:, :1] * sign, q[:, 1:] * sign
+    n2 = (v * v).sum(-1, keepdim=True)
+    small = n2 < 1e-12
+    n = torch.where(small, torch.ones_like(n2), n2).sqrt()  # no 0/0 in the branch torch.where leaves out
+    k = torch.where(small, 2.0 / w.clamp_min(0.5), 2.0 * torch.atan2(n, w) / n)
+    return (v * k).reshape(*R.shape[:-2], 3)
 
 
 def axis_angle_to_rotation_6d(aa: torch.Tensor) -> torch.Tensor:
