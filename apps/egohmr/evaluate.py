@@ -1,0 +1,178 @@
+"""Sampling a split with each guide, and its measures (what `volsmpl egohmr sample` reports).
+
+    prep = prepare(net, body, frames)                        # regressor outputs, scene crops, guidance points
+    recs = sample_frames(net, body, frames, prep, volume, GuideOptions(scale=30))   # per-frame records
+    b = max_batch(net, body, frames[0], volume, opts, budget_mb=2048)                # measured, not assumed
+
+Every guide of a run samples from the same noise (a generator seeded per batch) and is scored by the same exact
+tests, so rows differ only by the guidance.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from .diffusion import Guidance, Schedule, sample
+from .guidance import CollisionScore
+from .metrics import collision_ratio, contact, frame_errors, joint_weighted
+from .pose import POSE_DIM, pose_body, pose_joints
+
+GUIDE_POINTS = 20000  # scene points of the collision score (supp. D.2: 20k in a 2 x 2 m cube)
+GUIDE_CUBE = 2.0
+
+
+@dataclass
+class GuideOptions:
+    """How the sampler is guided (diffusion.Guidance, guidance.CollisionScore; paper defaults)."""
+
+    scale: float = 0.0
+    steps: int = 10
+    plain_steps: int = 5
+    plain_factor: float = 1.0
+    wrt: str = "denoised"
+    joints: str = "all"
+    reduce: str = "mean"
+
+
+@torch.no_grad()
+def prepare(net, body, frames, n_guide: int = GUIDE_POINTS, seed: int = 0) -> dict:
+    """Guide-independent inputs of frames: keypoint features, regressed pelvis / betas / pose, scene crops around
+    the regressed pelvis for the condition (net.config.scene_points) and for guidance and the collision metric
+    (n_guide points, camera frame). n_guide=0 skips the guidance points."""
+    from .dataset import frame_tensors, scene_crops
+
+    d = frame_tensors(frames, n_scene=0)
+    c_kp = net.keypoints(d["kp"])
+    pelvis, betas, pose_reg = net.regress(c_kp)
+    d.update(c_kp=c_kp, pelvis_hat=pelvis, betas_hat=betas, pose_reg=pose_reg)
+    d["scene_cond"] = scene_crops(frames, pelvis, net.config.scene_points, net.config.scene_size, seed)
+    if n_guide:
+        d["guide_points"] = scene_crops(frames, pelvis, n_guide, GUIDE_CUBE, seed + 7919) + pelvis[:, None]
+    return d
+
+
+def _rows(d: dict, idx) -> dict:
+    return {k: v[idx] for k, v in d.items()}
+
+
+def draw(net, body, d: dict, volume=None, opts: GuideOptions | None = None, seed: int = 0):
+    """One sample per frame of a prepared batch, guided by `volume` (None: unguided). Returns (poses (B, 144),
+    the CollisionScore or None)."""
+    sched = Schedule(net.config.steps)
+    cond = net.condition(d["c_kp"], d["scene_cond"], d["pelvis_hat"])
+    gen = torch.Generator().manual_seed(seed)
+    guide, score = None, None
+    if volume is not None and opts is not None and opts.scale:
+        score = CollisionScore(body, volume, d["betas_hat"], d["pelvis_hat"], d["guide_points"], opts.wrt,
+                               opts.joints, opts.reduce)
+        guide = Guidance(score.gradient, opts.scale, opts.steps, opts.plain_steps, opts.plain_factor)
+    x = sample(lambda xt, t: net.denoise(xt, t, cond), (len(cond), POSE_DIM), sched, gen, guide)
+    return x, score
+
+
+def sample_frames(net, body, frames, prep: dict, volume=None, opts: GuideOptions | None = None, batch: int = 16,
+                  seed: int = 0, scenes=None) -> list[dict]:
+    """Per-frame records of one guide over frames (prep: `prepare` of the same frames): errors (mm), collision
+    ratio, contact, sampling seconds per frame. scenes: the frames' scene meshes (camera frame) for contact."""
+    from .data import scene_mesh
+
+    recs = []
+    faces = torch.as_tensor(body.faces)
+    for s in range(0, len(frames), batch):
+        idx = torch.arange(s, min(s + batch, len(frames)))
+        d = _rows(prep, idx)
+        t0 = time.perf_counter()
+        x, _ = draw(net, body, d, volume, opts, seed=seed + s)
+        secs = (time.perf_counter() - t0) / len(idx)
+        with torch.no_grad():
+            out = pose_body(body, d["betas_hat"], x, d["pelvis_hat"])
+            err = frame_errors(out.joints[:, :24], d["joints"], d["visible"])
+            coll = collision_ratio(out.vertices, faces, d["guide_points"]).numpy()
+        meshes = [scenes[int(i)] if scenes is not None else scene_mesh(frames[int(i)]) for i in idx]
+        cont = contact(out.vertices.numpy(), meshes)
+        for j, i in enumerate(idx.tolist()):
+            recs.append({"frame": frames[i].name, "activity": frames[i].activity,
+                         **{k: float(v[j]) for k, v in err.items()},
+                         "collision_ratio": float(coll[j]), "contact": bool(cont[j]), "s_per_frame": secs,
+                         "pose": x[j].tolist()})
+    return recs
+
+
+def summarize(recs: list[dict]) -> dict:
+    """A guide's row: joint-weighted MPJPE (all / visible / invisible), PA-MPJPE, collision ratio, contact %,
+    seconds per frame; means over frames."""
+    if not recs:
+        return {"n_frames": 0}
+    arr = lambda k: np.array([r[k] for r in recs], dtype=np.float64)  # noqa: E731
+    errs = [{k: arr(k) for k in ("mpjpe_mm", "mpjpe_visible_mm", "mpjpe_invisible_mm", "n_visible", "n_invisible")}]
+    errs[0]["n_all"] = errs[0]["n_visible"] + errs[0]["n_invisible"]
+    return {"n_frames": len(recs),
+            "mpjpe_mm": joint_weighted(errs, "mpjpe_mm", "n_all"),
+            "mpjpe_visible_mm": joint_weighted(errs, "mpjpe_visible_mm", "n_visible"),
+            "mpjpe_invisible_mm": joint_weighted(errs, "mpjpe_invisible_mm", "n_invisible"),
+            "pa_mpjpe_mm": float(arr("pa_mpjpe_mm").mean()),
+            "collision_ratio": float(arr("collision_ratio").mean()),
+            "contact_pct": 100.0 * float(np.mean([r["contact"] for r in recs])),
+            "s_per_frame": float(arr("s_per_frame").mean())}
+
+
+@torch.no_grad()
+def regressor_and_sample_errors(net, body, frames, seed: int = 0) -> dict:
+    """Validation during training: MPJPE (all, invisible joints) of the regressor's pose and of one unguided
+    diffusion sample per frame, joints by forward kinematics with the regressed shape."""
+    d = prepare(net, body, frames, n_guide=0, seed=seed)
+    x, _ = draw(net, body, d, seed=seed)
+    res = {}
+    for name, pose in (("regressor", d["pose_reg"]), ("diffusion", x)):
+        J = pose_joints(body, d["betas_hat"], pose, d["pelvis_hat"])
+        e = frame_errors(J, d["joints"], d["visible"])
+        e["n_all"] = e["n_visible"] + e["n_invisible"]
+        res[f"{name}_mpjpe_mm"] = joint_weighted([e], "mpjpe_mm", "n_all")
+        res[f"{name}_invisible_mm"] = joint_weighted([e], "mpjpe_invisible_mm", "n_invisible") or float("nan")
+        res[f"{name}_visible_mm"] = joint_weighted([e], "mpjpe_visible_mm", "n_visible") or float("nan")
+    res["pelvis_err_mm"] = float(1000 * (d["pelvis_hat"] - d["pelvis"]).norm(dim=-1).mean())
+    return res
+
+
+def max_batch(net, body, frame_prep: dict, volume, opts: GuideOptions, budget_mb: float, device="cpu",
+              cap: int = 256) -> dict:
+    """The largest batch whose guided sampling step (denoiser + collision gradient) stays within `budget_mb`
+    of peak memory, measured (volsmpl.meter) by doubling from 1 up to `cap`, then bisecting. frame_prep: one
+    prepared frame (batch of 1) replicated. Returns {'max_batch', 'measured': {batch: peak MB}}."""
+    from volsmpl.meter import Meter, malloc_trim
+
+    measured = {}
+
+    def peak(b: int) -> float:
+        d = {k: v.expand(b, *v.shape[1:]).contiguous() for k, v in frame_prep.items()}
+        sched = Schedule(net.config.steps)
+        malloc_trim()
+        with Meter(device) as m:
+            cond = net.condition(d["c_kp"], d["scene_cond"], d["pelvis_hat"])
+            xt = torch.randn(b, POSE_DIM)
+            tt = torch.zeros(b, dtype=torch.long)
+            with torch.no_grad():
+                x0 = net.denoise(xt, tt, cond)
+            if volume is not None and opts.scale:
+                score = CollisionScore(body, volume, d["betas_hat"], d["pelvis_hat"], d["guide_points"], opts.wrt,
+                                       opts.joints, opts.reduce)
+                Guidance(score.gradient, opts.scale).step(xt, x0, 0, sched.posterior(x0, xt, tt)[1])
+        measured[b] = m.peak_bytes / 2**20
+        return measured[b]
+
+    best, b = 0, 1
+    while b <= cap and peak(b) <= budget_mb:
+        best, b = b, b * 2
+    lo, hi = best, min(b, cap + 1)
+    while hi - lo > 1 and lo >= 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if peak(mid) <= budget_mb else (lo, mid)
+    return {"max_batch": lo, "measured_mb": {str(k): round(v, 1) for k, v in sorted(measured.items())},
+            "capped": lo >= cap}
+
+
+__all__ = ["GuideOptions", "prepare", "draw", "sample_frames", "summarize", "regressor_and_sample_errors",
+           "max_batch", "GUIDE_POINTS"]

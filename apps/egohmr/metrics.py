@@ -1,0 +1,95 @@
+"""Metrics of the egocentric app (EgoHMR's protocol on our data), every one against exact references.
+
+- `mpjpe`: per-joint position error of the 24 SMPL joints after aligning the pelvises (mm), split by the
+  frame's `visible` mask (the ground-truth joint projects inside the image, in front of the camera);
+- `pa_mpjpe`: the error after a similarity Procrustes alignment of the 24 joints (mm);
+- `collision_ratio`: fraction of the frame's scene points (the 2 x 2 m cube around the body used for guidance)
+  inside the predicted body mesh, by the exact winding-number test (the same test for every guide, so rows compare);
+- `contact`: whether a body vertex lies within 2 cm of the scene mesh (exact distance, open3d) or inside it.
+
+    e = mpjpe(pred_joints, gt_joints)                  # (B, 24) mm
+    r = collision_ratio(vertices, faces, points)       # (B,) in [0, 1]
+    c = contact(vertices, scene_meshes, 0.02)          # (B,) bool
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from volsmpl.mesh_distance import winding_numbers
+
+
+def mpjpe(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
+    """Per-joint error after pelvis alignment, millimetres. Shape: (B, J, 3), (B, J, 3) -> (B, J)."""
+    if pred.shape != gt.shape:
+        raise ValueError(f"predicted joints {tuple(pred.shape)} and ground truth {tuple(gt.shape)} differ in shape")
+    return 1000.0 * ((pred - pred[:, :1]) - (gt - gt[:, :1])).norm(dim=-1)
+
+
+def procrustes(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
+    """`pred` moved by the similarity (scale, rotation, translation) that best fits it to `gt` in least squares
+    (Umeyama 1991). Shape: (B, J, 3), (B, J, 3) -> (B, J, 3)."""
+    p, g = pred.double(), gt.double()
+    mp, mg = p.mean(1, keepdim=True), g.mean(1, keepdim=True)
+    p0, g0 = p - mp, g - mg
+    H = p0.transpose(1, 2) @ g0  # (B, 3, 3)
+    U, S, Vt = torch.linalg.svd(H)
+    d = torch.sign(torch.linalg.det(Vt.transpose(1, 2) @ U.transpose(1, 2)))
+    D = torch.diag_embed(torch.stack([torch.ones_like(d), torch.ones_like(d), d], dim=-1))
+    R = Vt.transpose(1, 2) @ D @ U.transpose(1, 2)
+    scale = (S * torch.diagonal(D, dim1=1, dim2=2)).sum(-1) / (p0 ** 2).sum((1, 2))
+    out = scale[:, None, None] * p0 @ R.transpose(1, 2) + mg
+    return out.to(pred.dtype)
+
+
+def pa_mpjpe(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
+    """Per-joint error after Procrustes alignment, millimetres. Shape: -> (B, J)."""
+    return 1000.0 * (procrustes(pred, gt) - gt).norm(dim=-1)
+
+
+def collision_ratio(vertices: torch.Tensor, faces: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+    """Fraction of each frame's points inside its body mesh (winding number > 1/2, exact).
+    Shape: vertices (B, V, 3), faces (F, 3), points (B, N, 3) -> (B,)."""
+    return torch.stack([(winding_numbers(vertices[b].detach(), faces, points[b]) > 0.5).float().mean()
+                        for b in range(len(vertices))])
+
+
+def contact(vertices: np.ndarray, scenes: list, threshold: float = 0.02) -> np.ndarray:
+    """Whether some body vertex is within `threshold` metres of the scene mesh or inside one of its closed
+    components. Shape: vertices (B, V, 3), scenes: B trimesh meshes -> (B,) bool."""
+    import open3d as o3d
+
+    out = np.zeros(len(vertices), dtype=bool)
+    for b, mesh in enumerate(scenes):
+        rc = o3d.t.geometry.RaycastingScene()
+        rc.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+                         o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+        q = o3d.core.Tensor(np.asarray(vertices[b], np.float32))
+        d = rc.compute_distance(q).numpy()
+        inside = rc.compute_occupancy(q, nsamples=3).numpy() > 0.5
+        out[b] = bool(((d <= threshold) | inside).any())
+    return out
+
+
+def frame_errors(pred_joints: torch.Tensor, gt_joints: torch.Tensor, visible: torch.Tensor) -> dict:
+    """Per-frame MPJPE (all, visible, invisible joints; NaN where a frame has none) and PA-MPJPE, mm.
+    Shape: (B, 24, 3), (B, 24, 3), (B, 24) bool -> dict of (B,) arrays."""
+    e, pa = mpjpe(pred_joints, gt_joints), pa_mpjpe(pred_joints, gt_joints)
+    vis = visible.bool()
+    nv, ni = vis.sum(1), (~vis).sum(1)
+    ev = torch.where(nv > 0, (e * vis).sum(1) / nv.clamp_min(1), torch.full_like(e[:, 0], float("nan")))
+    ei = torch.where(ni > 0, (e * ~vis).sum(1) / ni.clamp_min(1), torch.full_like(e[:, 0], float("nan")))
+    return {"mpjpe_mm": e.mean(1).cpu().numpy(), "mpjpe_visible_mm": ev.cpu().numpy(),
+            "mpjpe_invisible_mm": ei.cpu().numpy(), "pa_mpjpe_mm": pa.mean(1).cpu().numpy(),
+            "n_visible": nv.cpu().numpy(), "n_invisible": ni.cpu().numpy()}
+
+
+def joint_weighted(errors: list[dict], key: str, count: str) -> float | None:
+    """Mean over all joints of a kind (visible / invisible) across frames: each frame's per-joint mean weighted
+    by its number of such joints (EgoHMR averages over joints, not frames)."""
+    num = sum(float(np.nansum(d[key] * d[count])) for d in errors)
+    den = sum(float(np.sum(d[count])) for d in errors)
+    return num / den if den else None
+
+
+__all__ = ["mpjpe", "procrustes", "pa_mpjpe", "collision_ratio", "contact", "frame_errors", "joint_weighted"]
