@@ -9,7 +9,7 @@ import dataclasses
 from dataclasses import dataclass, field
 
 from .body.poses import check_pose_mode
-from .groundtruth import SIGN_MODES
+from .groundtruth import GT_BACKENDS, SIGN_MODES
 from .models import learned_models, model_kind
 from .nn.config import VolumeConfig
 
@@ -40,6 +40,8 @@ class TrainConfig:
     gt_sign: str = "ray_winding"    # ground-truth sign: winding number (self-overlaps inside) counted along rays
                                     # ('ray_winding', exact, fastest), or libigl's 'fast_winding' / 'winding'; or 'raycast' parity
     gt_rays: int = 3                # rays of the vote for gt_sign='ray_winding' / 'raycast' (odd)
+    gt_backend: str = "auto"        # ground truth on 'open3d' (CPU) or 'torch' (the training device, no open3d/libigl);
+                                    # 'auto': torch on a GPU, open3d on the CPU when it imports (groundtruth.batch_sdf)
     micro_batch: int = 2            # bodies per forward/backward; gradients accumulate to the same full-batch step
     encoder_bf16: bool = False      # bfloat16 autocast of the PointNet encoder (CPU speed; see VolumetricSMPLNet)
     seed: int = 0
@@ -54,6 +56,8 @@ class TrainConfig:
     def __post_init__(self):
         if self.gt_sign not in SIGN_MODES:
             raise ValueError(f"gt_sign must be one of {SIGN_MODES}, got {self.gt_sign!r}")
+        if self.gt_backend not in GT_BACKENDS:
+            raise ValueError(f"gt_backend must be one of {GT_BACKENDS}, got {self.gt_backend!r}")
         if self.num_workers < 0:
             raise ValueError(f"num_workers must be >= 0 (0 makes batches in the training process), got {self.num_workers}")
         if not 0.0 <= self.ema_decay < 1.0:
