@@ -12,6 +12,11 @@
 - `winding_number`: generalised winding number (Jacobson et al. 2013) of a triangle mesh through libigl;
   `winding_number_reference`: our exact float64 torch evaluation (O(N*F), the tests' cross-check of libigl);
   `ray_winding_number`: the integer winding number of a closed mesh as signed ray crossings (open3d).
+- `batch_sdf`: the ground truth of training, from a selectable backend (`GT_BACKENDS`): 'open3d' is
+  `batch_mesh_sdf` on the CPU; 'torch' is `volsmpl.mesh_query.MeshQuery` on the vertices' device (exact distance
+  to the nearest triangle in float64, the exact integer winding number as signed crossings of one ray, in bounded
+  memory), which needs neither open3d nor libigl; 'auto' (`resolve_gt_backend`) takes torch on a GPU, open3d
+  on the CPU when it imports, torch otherwise.
 - The training-query sampler lives in `volsmpl.training_queries`.
 
 Every function accepts numpy arrays or torch tensors; torch inputs give torch outputs on the points' device
@@ -25,6 +30,8 @@ import numpy as np
 import torch
 
 SIGN_MODES = ("raycast", "winding", "fast_winding", "ray_winding")
+#: ground-truth backends of `batch_sdf` (TrainConfig.gt_backend)
+GT_BACKENDS = ("auto", "open3d", "torch")
 
 
 # ---------------------------------------------------------------------------------------------- helpers
@@ -391,3 +398,71 @@ def batch_mesh_sdf(vertices, faces, points, sign: str = "raycast", nsamples: int
             _check_mesh(v[i], f)
             out[i] = _scene_sdf(raycasting_scene(v[i], f), v[i], f, p[i], sign, nsamples, chunk)
     return _wrap_like(out, points)
+
+
+# ---------------------------------------------------------------------------------------------- backends
+def _open3d_imports() -> bool:
+    try:
+        _open3d()
+    except ImportError:
+        return False
+    return True
+
+
+def resolve_gt_backend(backend: str, device) -> str:
+    """The backend `batch_sdf` uses for meshes on `device`: 'open3d' or 'torch'.
+
+    'auto': torch on a non-CPU device (the ground truth stays where training runs), open3d on the CPU when it
+    imports (multi-threaded BVH, the faster there), torch otherwise.
+    """
+    if backend not in GT_BACKENDS:
+        raise ValueError(f"gt_backend={backend!r} is unknown; use one of {GT_BACKENDS}.")
+    if backend == "auto":
+        if torch.device(device).type != "cpu":
+            return "torch"
+        return "open3d" if _open3d_imports() else "torch"
+    if backend == "open3d" and not _open3d_imports():
+        raise ImportError("gt_backend='open3d' but open3d does not import; install it (pip install 'open3d>=0.18') "
+                          "or use gt_backend='torch' (or 'auto').")
+    return backend
+
+
+def batch_sdf(vertices, faces, points, sign: str = "ray_winding", nsamples: int = 3, backend: str = "auto",
+              check_closed: bool = True, chunk: int | None = None):
+    """Exact signed distances (negative inside) for a batch of posed bodies sharing one topology, by backend.
+
+    Shape: vertices (B, V, 3), faces (F, 3), points (B, N, 3) -> (B, N), torch on the points' device and dtype
+    for torch points (numpy otherwise).
+    backend: 'open3d' (`batch_mesh_sdf` on the CPU), 'torch' (`MeshQuery` on the vertices' device, at most `chunk`
+    point-triangle pairs at once: DEFAULT_CHUNK ~0.6 GB when None) or 'auto' (`resolve_gt_backend`).
+    The torch backend counts crossings of one ray with exact tie-breaking, so every sign mode needs no vote:
+    'raycast' is the parity of the crossings, the other modes the winding number (> 0 inside: self-overlaps
+    inside); it needs a closed, consistently oriented mesh (checked when check_closed).
+    """
+    dev = vertices.device if torch.is_tensor(vertices) else torch.device("cpu")
+    if resolve_gt_backend(backend, dev) == "open3d":
+        return batch_mesh_sdf(vertices, faces, points, sign=sign, nsamples=nsamples, check_closed=check_closed)
+    from .mesh_query import DEFAULT_CHUNK, MeshQuery
+
+    _validate_sign(sign, nsamples)
+    vt = torch.as_tensor(vertices, device=dev)
+    pt = torch.as_tensor(points)
+    if vt.ndim != 3 or pt.ndim != 3 or pt.shape[-1] != 3 or len(vt) != len(pt):
+        raise ValueError(f"batch_sdf expects vertices (B, V, 3) and points (B, N, 3) with the same B, got "
+                         f"{tuple(vt.shape)} and {tuple(pt.shape)}.")
+    ft = torch.as_tensor(faces, device=dev).long()
+    if check_closed and len(vt):
+        _require_closed(_to_numpy(ft, "faces", np.int64), sign, _to_numpy(vt[0], "vertices", np.float64))
+    out = torch.zeros(pt.shape[:2], dtype=torch.float64, device=dev)
+    for i in range(len(vt)):
+        if pt.shape[1] == 0:
+            break
+        mq = MeshQuery(vt[i], ft, chunk=DEFAULT_CHUNK if chunk is None else chunk)
+        p = pt[i].to(dev)
+        signed, total = mq.crossings(p)
+        inside = (total % 2 == 1) if sign == "raycast" else signed > 0
+        d = mq.distances(p)
+        out[i] = torch.where(inside, -d, d)
+    if not torch.is_tensor(points):
+        return _wrap_like(out.cpu().numpy(), points)
+    return out.to(points.device, points.dtype if points.is_floating_point() else torch.get_default_dtype())

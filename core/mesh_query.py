@@ -1,0 +1,269 @@
+"""Exact nearest triangles and winding numbers of triangle meshes in torch: any device, bounded memory.
+
+    mq = MeshQuery(vertices, faces)          # faces grouped into spatial clusters with bounding spheres / boxes
+    idx = mq.nearest_faces(points)           # (N,) the exact nearest triangle of every point
+    w = mq.winding_numbers(points)           # (N,) int64 exact winding numbers of a closed, oriented mesh
+
+This is the torch ground truth of training (`volsmpl.groundtruth.batch_sdf(backend='torch')`) and the torch
+path of the 'mesh' model kind (`volsmpl.mesh_distance`): it needs neither open3d nor libigl and runs where the
+vertices are (a CUDA GPU when training runs there).
+
+Culling (exact, conservative): faces are sorted along a Morton curve of their centroids and cut into clusters of
+`cluster_size` faces, each with a bounding sphere, an axis-aligned box in the ray frame and a representative vertex.
+  - nearest face: a point's distance to a cluster is at least |p - centre| - radius; the distance to the faces of
+    the cluster whose sphere is nearest gives an upper bound u; only clusters with lower bound <= u are searched,
+    triangle by triangle (Ericson's closest point).
+  - winding number: signed crossings of one ray from each point (fixed direction, +z of the ray frame): only
+    clusters whose box contains the ray are tested. The 2-D point-in-triangle test evaluates every edge function
+    once per edge in a canonical order (lower vertex index first) and breaks ties by simulation of simplicity (the
+    point moved by (e, e^2)), so a ray through an edge or a vertex is counted exactly once: for a closed, consistently
+    oriented mesh the count is the exact integer winding number of every point not on the surface (1 inside,
+    0 outside, 2 in a self-overlap), with no vote over rays.
+
+Memory: work is done in blocks of at most `chunk` point-triangle (or point-cluster) pairs, about 0.6 kB each
+in float64 (~0.6 GB at the default 2^20), whatever the number of points. Cost: O(N * F / cluster_size) for
+the culling plus the surviving pairs (tens of clusters per point near a body surface).
+Everything runs in float64 on the vertices' device; nothing here is differentiable.
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+
+__all__ = ["closest_points_on_triangles", "MeshQuery", "DEFAULT_CHUNK", "RAY_DIRECTION"]
+
+#: default bound on the point-triangle pairs evaluated at once (~0.6 kB each)
+DEFAULT_CHUNK = 1 << 20
+#: direction of the crossing rays (unit; not axis aligned, so rays rarely run along the edges of axis-aligned meshes)
+RAY_DIRECTION = (0.2672612419124244, 0.5345224838248488, 0.8017837257372732)  # (1, 2, 3) / sqrt(14)
+
+
+def _dot(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    """Dot products over the last axis (..., 3) -> (...): three products, faster than a reduction over 3 values."""
+    return x[..., 0] * y[..., 0] + x[..., 1] * y[..., 1] + x[..., 2] * y[..., 2]
+
+
+def closest_points_on_triangles(p: torch.Tensor, a: torch.Tensor, b: torch.Tensor, c: torch.Tensor) -> torch.Tensor:
+    """Closest point to p on the triangle (a, b, c), elementwise (Ericson, Real-Time Collision Detection 5.1.5).
+
+    Shape: p, a, b, c (..., 3) broadcastable -> (..., 3). Differentiable almost everywhere.
+    Example:
+        >>> t = torch.tensor([[0., 0, 0], [1, 0, 0], [0, 1, 0]])
+        >>> closest_points_on_triangles(torch.tensor([0.2, 0.2, 1.0]), *t)
+        tensor([0.2000, 0.2000, 0.0000])
+    """
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = _dot(ab, ap), _dot(ac, ap)
+    bp = p - b
+    d3, d4 = _dot(ab, bp), _dot(ac, bp)
+    cp = p - c
+    d5, d6 = _dot(ab, cp), _dot(ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    tiny = torch.finfo(p.dtype).tiny
+
+    def safe(n, d):
+        return n / torch.where(d.abs() > tiny, d, torch.full_like(d, tiny))
+
+    denom = va + vb + vc
+    v_in, w_in = safe(vb, denom), safe(vc, denom)
+    out = a + ab * v_in[..., None] + ac * w_in[..., None]  # interior (face region)
+    # edge regions, then vertex regions: later assignments take precedence, as in Ericson's early returns
+    w_bc = safe(d4 - d3, (d4 - d3) + (d5 - d6))
+    out = torch.where(((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0))[..., None], b + (c - b) * w_bc[..., None], out)
+    w_ac = safe(d2, d2 - d6)
+    out = torch.where(((vb <= 0) & (d2 >= 0) & (d6 <= 0))[..., None], a + ac * w_ac[..., None], out)
+    v_ab = safe(d1, d1 - d3)
+    out = torch.where(((vc <= 0) & (d1 >= 0) & (d3 <= 0))[..., None], a + ab * v_ab[..., None], out)
+    out = torch.where(((d6 >= 0) & (d5 <= d6))[..., None], c.expand_as(out), out)
+    out = torch.where(((d3 >= 0) & (d4 <= d3))[..., None], b.expand_as(out), out)
+    out = torch.where(((d1 <= 0) & (d2 <= 0))[..., None], a.expand_as(out), out)
+    return out
+
+
+def _kd_clusters(x: torch.Tensor, size: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Indices (C, m) of points x (n, 3) grouped into C = 2^L compact clusters of m <= size (median splits along
+    the longest axis, as a k-d tree's leaves), and a mask (C, m), False on the evenly spread indices repeated to
+    fill the clusters when n is not C * m (each index is True exactly once)."""
+    n = len(x)
+    levels = max(0, math.ceil(math.log2(max(1.0, n / size))))
+    C = 1 << levels
+    m = -(-n // C)
+    base = torch.arange(n, device=x.device)
+    if C * m > n:
+        base = torch.cat([base, torch.linspace(0, n - 1, C * m - n, device=x.device).round().long()])
+    slot = torch.arange(C * m, device=x.device)  # slots < n hold the originals
+    for level in range(levels):
+        g = slot.reshape(1 << level, -1)  # groups of this level, each split in two halves
+        pts = x[base[g]]  # (G, s, 3)
+        axis = (pts.amax(1) - pts.amin(1)).argmax(dim=1)  # (G,) longest extent
+        key = torch.gather(pts, 2, axis[:, None, None].expand(-1, pts.shape[1], 1))[..., 0]
+        slot = torch.gather(g, 1, key.argsort(dim=1, stable=True)).reshape(-1)
+    return base[slot].reshape(C, m), (slot < n).reshape(C, m)
+
+
+def _ray_frame(dtype, device) -> torch.Tensor:
+    """Rotation R (3, 3) whose third row is RAY_DIRECTION: x -> R x maps the ray direction to +z."""
+    d = torch.tensor(RAY_DIRECTION, dtype=dtype, device=device)
+    a = torch.tensor([1.0, 0.0, 0.0], dtype=dtype, device=device)
+    e1 = a - (a @ d) * d
+    e1 = e1 / e1.norm()
+    return torch.stack([e1, torch.linalg.cross(d, e1), d])
+
+
+def _sos_sign(e: torch.Tensor, ax, ay, bx, by) -> torch.Tensor:
+    """Sign of the edge function e = (b - a) x (p - a) of the point moved by (eps, eps^2) (simulation of simplicity)."""
+    tie = torch.where(by != ay, torch.sign(ay - by), torch.sign(bx - ax))
+    return torch.where(e != 0, torch.sign(e), tie)
+
+
+class MeshQuery:
+    """Spatial clusters of a triangle mesh's faces for exact nearest-face and ray-crossing queries (module docstring).
+
+    Shape: vertices (V, 3) float, faces (F, 3) int on the same device (faces are moved there); queries take points
+    (N, 3) and return (N,) on the vertices' device.
+    Args: cluster_size: faces per cluster (culling granularity); chunk: bound on the pairs evaluated at once.
+    """
+
+    def __init__(self, vertices: torch.Tensor, faces: torch.Tensor, cluster_size: int = 32, chunk: int = DEFAULT_CHUNK):
+        if vertices.ndim != 2 or vertices.shape[-1] != 3:
+            raise ValueError(f"vertices must be (V, 3), got {tuple(vertices.shape)}; pass one mesh at a time.")
+        faces = torch.as_tensor(faces, device=vertices.device).long()
+        if faces.ndim != 2 or faces.shape[-1] != 3 or len(faces) == 0:
+            raise ValueError(f"faces must be (F, 3) with F > 0, got {tuple(faces.shape)}.")
+        if int(faces.min()) < 0 or int(faces.max()) >= len(vertices):
+            raise ValueError(f"faces index vertices outside [0, {len(vertices)}); pass the faces of these vertices.")
+        if cluster_size < 1 or chunk < cluster_size:
+            raise ValueError(f"cluster_size={cluster_size} must be >= 1 and chunk={chunk} >= cluster_size.")
+        v = vertices.detach().to(torch.float64)
+        if not torch.isfinite(v).all():
+            raise ValueError("vertices contain NaN/inf; the posed mesh is broken (check the pose/shape parameters).")
+        self.device, self.chunk, self.M = v.device, int(chunk), int(cluster_size)
+        self.num_faces = len(faces)
+        ids, self.valid = _kd_clusters(v[faces].mean(1), self.M)  # (C, m), m <= cluster_size
+        self.face_ids, self.M = ids, ids.shape[1]
+        fc = faces[ids]  # (C, M, 3)
+        tri = v[fc]  # (C, M, 3, 3)
+        self.tri = tri
+        lo, hi = tri.amin(dim=(1, 2)), tri.amax(dim=(1, 2))
+        self.center = 0.5 * (lo + hi)  # (C, 3)
+        self.radius = (tri - self.center[:, None, None]).norm(dim=-1).amax(dim=(1, 2))  # (C,)
+        self.tri_flat = v[faces]  # (F, 3, 3)
+        self.face_center = tri.mean(2)  # (C, M, 3) per-face bounding spheres (centroid, farthest corner)
+        self.face_radius = (tri - self.face_center[..., None, :]).norm(dim=-1).amax(dim=-1)  # (C, M)
+        # ray frame: rotated vertices, per-cluster 2-D boxes and top, canonical edges (lower vertex index first)
+        self.R = _ray_frame(torch.float64, v.device)
+        rtri = v[fc] @ self.R.T  # (C, M, 3, 3)
+        self.rtri = rtri
+        self.rlo, self.rhi = rtri.amin(dim=(1, 2)), rtri.amax(dim=(1, 2))  # (C, 3)
+        i0, i1 = fc, fc.roll(-1, dims=-1)  # edges (0,1), (1,2), (2,0): (C, M, 3)
+        flip = i0 > i1
+        self.edge_a = torch.where(flip[..., None], rtri.roll(-1, dims=-2), rtri)[..., :2]  # (C, M, 3, 2)
+        self.edge_b = torch.where(flip[..., None], rtri, rtri.roll(-1, dims=-2))[..., :2]
+        self.edge_s = torch.where(flip, -1.0, 1.0).to(torch.float64)  # (C, M, 3)
+
+    def _points(self, points: torch.Tensor) -> torch.Tensor:
+        if points.ndim != 2 or points.shape[-1] != 3:
+            raise ValueError(f"points must be (N, 3), got {tuple(points.shape)}.")
+        p = points.detach().to(self.device, torch.float64)
+        if not torch.isfinite(p).all():
+            raise ValueError("points contain NaN/inf; remove or replace them before querying the mesh.")
+        return p
+
+    def _pair_blocks(self, mask: torch.Tensor):
+        """(point, cluster) pairs of a boolean (n, C) mask, in blocks of at most chunk / M pairs."""
+        pi, ci = mask.nonzero(as_tuple=True)
+        step = max(1, self.chunk // self.M)
+        for s in range(0, len(pi), step):
+            yield pi[s:s + step], ci[s:s + step]
+
+    def _face_sq_dists(self, p: torch.Tensor, ci: torch.Tensor) -> torch.Tensor:
+        """Squared distances (P, M) of points p (P, 3) to the faces of clusters ci (P,); fillers give inf."""
+        tri = self.tri[ci]  # (P, M, 3, 3)
+        pp = p[:, None]
+        q = closest_points_on_triangles(pp, tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
+        d2 = _dot(q - pp, q - pp)
+        return torch.where(self.valid[ci], d2, torch.full_like(d2, math.inf))
+
+    @torch.no_grad()
+    def nearest_faces(self, points: torch.Tensor) -> torch.Tensor:
+        """Index of the exact nearest triangle of every point (ties: the lowest face index).
+
+        Shape: points (N, 3) -> (N,) int64 on the vertices' device.
+        """
+        p_all = self._points(points)
+        out = torch.empty(len(p_all), dtype=torch.long, device=self.device)
+        C = len(self.center)
+        step = max(1, self.chunk // max(C, self.M))
+        for s in range(0, len(p_all), step):
+            p = p_all[s:s + step]
+            n = len(p)
+            gap = torch.cdist(p, self.center) - self.radius  # (n, C): lower bound of the distance to each cluster
+            first = gap.argmin(dim=1)
+            ub = self._face_sq_dists(p, first).amin(dim=1).sqrt()  # upper bound: exact distance to one cluster
+            lim = ub + 1e-6 + 1e-9 * ub  # rounding of the bounds (cdist by matrix products) must never drop the nearest
+            best = torch.full((n,), math.inf, dtype=torch.float64, device=self.device)
+            cand_d, cand_f, cand_p = [], [], []
+            for pi, ci in self._pair_blocks(gap <= lim[:, None]):
+                fgap = (p[pi, None] - self.face_center[ci]).norm(dim=-1) - self.face_radius[ci]  # (P, M) per face
+                qi, mi = ((fgap <= lim[pi, None]) & self.valid[ci]).nonzero(as_tuple=True)
+                face, pt = self.face_ids[ci[qi], mi], pi[qi]
+                tri, x = self.tri_flat[face], p[pt]
+                q = closest_points_on_triangles(x, tri[:, 0], tri[:, 1], tri[:, 2])
+                d2 = _dot(q - x, q - x)
+                best.scatter_reduce_(0, pt, d2, reduce="amin")
+                cand_d.append(d2), cand_f.append(face), cand_p.append(pt)
+            d, f, pi = torch.cat(cand_d), torch.cat(cand_f), torch.cat(cand_p)
+            f = torch.where(d <= best[pi], f, torch.full_like(f, self.num_faces))
+            res = torch.full((n,), self.num_faces, dtype=torch.long, device=self.device)
+            out[s:s + n] = res.scatter_reduce_(0, pi, f, reduce="amin")
+        return out
+
+    @torch.no_grad()
+    def distances(self, points: torch.Tensor) -> torch.Tensor:
+        """Exact unsigned distances (N,) float64 of points (N, 3) to the mesh (to their nearest triangle)."""
+        p = self._points(points)
+        tri = self.tri_flat[self.nearest_faces(p)]
+        q = closest_points_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
+        return _dot(q - p, q - p).sqrt()
+
+    @torch.no_grad()
+    def crossings(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Signed and unsigned counts of the surface crossings of a ray from every point along RAY_DIRECTION.
+
+        The signed count (+1 leaving through a face, -1 entering) is the exact winding number of a closed,
+        consistently oriented mesh; the unsigned count's parity is the ray-parity inside test.
+        Shape: points (N, 3) -> signed (N,) int64, unsigned (N,) int64 on the vertices' device.
+        """
+        p_all = self._points(points) @ self.R.T
+        signed = torch.zeros(len(p_all), dtype=torch.long, device=self.device)
+        total = torch.zeros_like(signed)
+        C = len(self.center)
+        step = max(1, self.chunk // max(C, self.M))
+        for s in range(0, len(p_all), step):
+            p = p_all[s:s + step]
+            x, y, z = p[:, 0, None], p[:, 1, None], p[:, 2, None]
+            hit = (x >= self.rlo[:, 0]) & (x <= self.rhi[:, 0]) & (y >= self.rlo[:, 1]) & (y <= self.rhi[:, 1]) \
+                & (z <= self.rhi[:, 2])  # (n, C): the ray can meet the cluster's box
+            for pi, ci in self._pair_blocks(hit):
+                w = self._cluster_crossings(p[pi], ci)  # (P, M) in {-1, 0, 1}
+                signed[s:s + len(p)].index_add_(0, pi, w.sum(1))
+                total[s:s + len(p)].index_add_(0, pi, w.abs().sum(1))
+        return signed, total
+
+    def _cluster_crossings(self, p: torch.Tensor, ci: torch.Tensor) -> torch.Tensor:
+        """Crossings (P, M) in {-1, 0, +1} of the +z rays from ray-frame points p (P, 3) with the faces of clusters ci."""
+        a, b, sgn = self.edge_a[ci], self.edge_b[ci], self.edge_s[ci]  # (P, M, 3, 2), (P, M, 3)
+        px, py = p[:, None, None, 0], p[:, None, None, 1]
+        ax, ay, bx, by = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
+        e = (bx - ax) * (py - ay) - (by - ay) * (px - ax)  # canonical edge functions (P, M, 3)
+        side = _sos_sign(e, ax, ay, bx, by) * sgn  # sign of each directed edge of the face
+        inside = (side[..., 0] == side[..., 1]) & (side[..., 1] == side[..., 2]) & self.valid[ci]
+        lam = e * sgn  # lam_k of edge k is the weight of the opposite vertex (k + 2) % 3
+        z = self.rtri[ci][..., 2] - p[:, None, None, 2]  # (P, M, 3) vertex heights above the point
+        above = (lam[..., 1] * z[..., 0] + lam[..., 2] * z[..., 1] + lam[..., 0] * z[..., 2]) * side[..., 0] > 0
+        return torch.where(inside & above, side[..., 0], torch.zeros_like(side[..., 0])).long()
+
+    def winding_numbers(self, points: torch.Tensor) -> torch.Tensor:
+        """Exact integer winding numbers (N,) int64 of points (N, 3) w.r.t. a closed, consistently oriented mesh."""
+        return self.crossings(points)[0]
