@@ -19,6 +19,7 @@ SUBCOMMANDS = {
     "eval": ("volsmpl.evaluate", "evaluate a checkpoint on the validation set (paper Table 1 protocol)"),
     "report": ("volsmpl.report", "write docs/report.md: every result table beside the paper's numbers"),
     "motion": ("volsmpl.apps.motion.cli", "scene-constrained walking: VolumetricSMPL vs COAP vs exact mesh (paper Table 5, D.1)"),
+    "egohmr": ("volsmpl.apps.egohmr.cli", "egocentric body recovery, collision-guided diffusion: VolumetricSMPL vs COAP vs exact mesh (paper Table 4)"),
     "hoi": ("volsmpl.apps.hoi.cli", "human-object joint optimisation: VolumetricSMPL vs COAP vs exact mesh (paper Table 3)"),
     "selfpen": ("volsmpl.apps.selfpen.cli", "repair self-intersections by pose optimisation (paper Table 6)"),
     "train": ("volsmpl.train", "train the volumetric model on the default body (resumable; torchrun for DDP)"),

@@ -246,7 +246,8 @@ def summary_section(ctx) -> list[str]:
             assign[tid].append((backend, backend, s))
     out = []
     for tid in tids:
-        out += ([""] if out else []) + summary_table(tid, assign[tid]) + paper_mismatch(d, tid)
+        key_map = paper_tables.TABLES[tid].get("our_keys")
+        out += ([""] if out else []) + summary_table(tid, assign[tid], key_map) + paper_mismatch(d, tid)
     n = n_cases(d)
     if n is not None:
         out += ["", f"{n} per-case records in the result (`cases`)."]
