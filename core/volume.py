@@ -11,7 +11,8 @@
 
 Data flow: body output -> partition (G_k, padded boxes, part surface samples) -> PointNet z_k ->
 NBW decoder weights (only for the parts whose boxes hold query points; cached per body output and
-grown by later queries) -> query: points to part frames, cull by boxes,
+grown by later queries; reused only while the output's values and the weights' values are the same,
+checked by content fingerprints, volsmpl.tensor_fingerprint) -> query: points to part frames, cull by boxes,
 tiny decoders only on (point, part) pairs inside boxes (or densely, the reference path),
 min over parts; points in no box get the analytic box SDF (paper eq. 4).
 """
@@ -27,6 +28,7 @@ from .nn.analytic import box_sdf
 from .nn.volsmpl_net import PartCode
 from .partition import Partition
 from .self_penetration import SELFPEN_TAU, overlap_samples, reduce_selfpen, sdf_penalty
+from .tensor_fingerprint import fingerprint, module_fingerprint
 from .validate import check_points
 from .volume_api import BodyVolume, check_output
 
@@ -46,9 +48,7 @@ class Encoding:
     box_min: torch.Tensor
     box_max: torch.Tensor
     code: PartCode
-    stamp: tuple
-    ref: tuple | None = None  # detached (vertices, joints, full_pose) of a constant output, for value reuse
-    weights: tuple | None = None  # the network's weights_stamp when encoded: a cached encoding is stale after any change
+    key: tuple | None = None  # content fingerprints of (the output, the volume's weights) when cached (Volume.cache_key)
     center: torch.Tensor | None = None
     scale: torch.Tensor | None = None
     parts: torch.Tensor | None = None
@@ -59,16 +59,6 @@ class Encoding:
         if self.slot is None:
             return torch.ones(num_parts, dtype=torch.bool, device=self.G.device)
         return self.slot >= 0
-
-
-def _stamp(out) -> tuple:
-    return tuple((t.data_ptr(), t._version, tuple(t.shape), t.dtype, t.device) for t in (out.vertices, out.joints, out.full_pose))
-
-
-def weights_stamp(module: torch.nn.Module) -> tuple:
-    """Identity and in-place version of every parameter and buffer of a module: changes when an optimiser
-    step, load_state_dict, .to() or any in-place edit touches a weight, so cached encodings can tell."""
-    return tuple((t.data_ptr(), t._version) for t in (*module.parameters(), *module.buffers()))  # .to() moves storage
 
 
 def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -102,8 +92,9 @@ class Volume(BodyVolume):
 
     # ------------------------------------------------------------------ encoding
     def encode(self, out, generator: torch.Generator | None = None, fresh: bool = False) -> Encoding:
-        """Encode a body output (B bodies); cached on the output and reused while its tensors and the
-        network's weights are unchanged (an optimiser step or load_state_dict between queries re-encodes).
+        """Encode a body output (B bodies); cached on the output and reused while the values of its tensors
+        and of the volume's weights are unchanged (checked by content: `cache_key`; any edit re-encodes, also
+        through `.data` or `.numpy()`).
 
         Args:
             out: body forward output with vertices (B, V, 3), joints (B, >=J, 3), full_pose (B, J*3).
@@ -113,24 +104,31 @@ class Volume(BodyVolume):
         """
         check_output(out)
         use_cache = generator is None and not self.training and not fresh
-        cached = self._cached(out) if use_cache else None
+        key = self.cache_key(out) if use_cache else None
+        cached = self._cached(out, key) if use_cache else None
         if cached is not None and cached.parts is None:
             return cached
         frames = None if cached is None else (cached.G, cached.box_min, cached.box_max)
         enc = self._encode(out, generator, frames=frames)
         if use_cache:
-            self._store(out, enc)
+            self._store(out, enc, key)
         return enc
 
-    def _store(self, out, enc: Encoding) -> None:
+    def cache_key(self, out) -> tuple:
+        """What a cached encoding must match to be reused: content fingerprints of the output's vertices, joints
+        and full_pose and of every weight and buffer of the volume (volsmpl.tensor_fingerprint; ~1 ms for the
+        3.6 M weights on one CPU thread)."""
+        return fingerprint((out.vertices, out.joints, out.full_pose)), module_fingerprint(self)
+
+    def _store(self, out, enc: Encoding, key: tuple) -> None:
         """Cache `enc` on the output (and, for a constant output, as the last encoding for value reuse)."""
+        enc.key = key
         try:
             out._volsmpl_encoding = (self, enc)
         except AttributeError:  # outputs that take no attributes are re-encoded on every call
             pass
-        if not (out.vertices.requires_grad or out.joints.requires_grad):
-            enc.ref = tuple(t.detach().clone() for t in (out.vertices, out.joints, out.full_pose))
-            self._last = enc
+        if not (out.vertices.requires_grad or out.joints.requires_grad or out.full_pose.requires_grad):
+            self._last = enc  # may answer an equal new constant output (value reuse)
 
     def _encoding_for(self, out, points: torch.Tensor) -> Encoding:
         """An encoding of `out` that answers queries at `points` (B, N, 3): the cached one when it has a code
@@ -139,7 +137,8 @@ class Volume(BodyVolume):
         distance, so encoding it would change nothing: queries near a few parts (a hand and an object)
         run the encoder on those parts only."""
         check_output(out)
-        enc = None if self.training else self._cached(out)
+        key = None if self.training else self.cache_key(out)
+        enc = None if self.training else self._cached(out, key)
         if enc is not None and enc.parts is None:
             return enc
         frames = self._frames(out) if enc is None else (enc.G, enc.box_min, enc.box_max)
@@ -152,7 +151,7 @@ class Volume(BodyVolume):
         parts = None if need.all() else need.nonzero()[:, 0]
         enc = self._encode(out, None, parts=parts, frames=frames)
         if not self.training:
-            self._store(out, enc)
+            self._store(out, enc, key)
         return enc
 
     @torch.no_grad()
@@ -165,17 +164,16 @@ class Volume(BodyVolume):
             need |= inside_boxes(x, box_min.detach(), box_max.detach()).any(dim=2).any(dim=0)
         return need
 
-    def _cached(self, out) -> Encoding | None:
-        """The encoding of `out` made earlier (same tensors, or equal constant tensors), else None."""
+    def _cached(self, out, key: tuple) -> Encoding | None:
+        """The encoding made earlier of `out` (or of an equal constant output) by this volume with the same
+        weights: same content fingerprints (`key` = cache_key(out)), else None."""
         cached = getattr(out, "_volsmpl_encoding", None)
-        if cached is not None and cached[0] is self and cached[1].stamp == _stamp(out) \
-                and cached[1].weights == weights_stamp(self.net):
+        if cached is not None and cached[0] is self and cached[1].key == key:
             return cached[1]
-        last, no_grad = self._last, not (out.vertices.requires_grad or out.joints.requires_grad)
-        if no_grad and last is not None and last.ref[0].shape == out.vertices.shape and all(
-                torch.equal(a, b) for a, b in zip(last.ref, (out.vertices, out.joints, out.full_pose))) \
-                and last.weights == weights_stamp(self.net):
-            return last  # same pose, shape and translation as the previous constant output
+        last = self._last
+        if last is not None and last.key == key and not (
+                out.vertices.requires_grad or out.joints.requires_grad or out.full_pose.requires_grad):
+            return last  # same pose, shape and translation as the previous constant output, same weights
         return None
 
     def _frames(self, out):
@@ -215,8 +213,8 @@ class Volume(BodyVolume):
                 local = (local - cs[:, :, None]) / ss[:, :, None]
             with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
                 code = self.net.encode(local, parts)
-        return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, stamp=_stamp(out), center=center,
-                        scale=scale, parts=parts, slot=slot, weights=weights_stamp(self.net))
+        return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, center=center,
+                        scale=scale, parts=parts, slot=slot)
 
     # ------------------------------------------------------------------ evaluation core
     @property
@@ -362,7 +360,7 @@ class Volume(BodyVolume):
         if not tau > 0:
             raise ValueError(f"tau must be > 0 (metres: the SDF scale of the soft occupancy), got {tau}")
         check_output(out)
-        enc = None if self.training else self._cached(out)
+        enc = None if self.training else self._cached(out, self.cache_key(out))
         G, box_min, box_max = self._frames(out) if enc is None else (enc.G, enc.box_min, enc.box_max)
         mask = self.partition.collision_mask
         overl, samples, padded = overlap_samples(G, box_min, box_max, mask, n_points, generator)

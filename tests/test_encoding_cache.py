@@ -1,0 +1,175 @@
+"""The encoding cache never answers for another body or other weights: every way of editing the body output or
+the weights (autograd in-place ops, `.data`, `.numpy()`, `.detach()` aliases, optimiser steps, load_state_dict)
+gives the values of a volume that never cached anything (the reference: a second volume with the same weights,
+queried on a copy of the tensors)."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+import torch
+
+import volsmpl
+from conftest import random_pose
+from volsmpl.tensor_fingerprint import fingerprint
+
+
+@pytest.fixture(scope="module")
+def setup(tiny_config):
+    torch.manual_seed(3)
+    b = volsmpl.create_body()
+    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).eval()
+    return b, vol
+
+
+def _reference(vol, tiny_config, out, points):
+    """A fresh volume with vol's current weights (no cache), on copies of the output's tensors."""
+    ref = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=tiny_config).eval()
+    ref.load_state_dict(vol.state_dict())
+    mine = dict(vol.named_buffers())
+    with torch.no_grad():
+        for name, buf in ref.named_buffers():  # the partition's buffers are not in the state dict
+            buf.copy_(mine[name])
+    copy = SimpleNamespace(**{n: getattr(out, n).detach().clone() for n in ("vertices", "joints", "full_pose")})
+    with torch.no_grad():
+        return ref.query(copy, points)
+
+
+def _points(out, n=300, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    v = out.vertices.detach()
+    idx = torch.randint(0, v.shape[1], (n,), generator=g)
+    return v[:, idx] + 0.03 * torch.randn(v.shape[0], n, 3, generator=g)
+
+
+def _edit_output(out, how):
+    if how == "data":
+        out.vertices.data.add_(0.02)
+    elif how == "numpy":
+        out.vertices.numpy()[..., 1] -= 0.02
+    elif how == "detach":
+        out.vertices.detach().mul_(1.01)
+    elif how == "inplace":
+        out.vertices.add_(0.02)
+    elif how == "joints_data":  # part frames move, vertices stay
+        out.joints.data[:, 1:] += 0.02
+    elif how == "pose_numpy":
+        out.full_pose.numpy()[:, 3:6] += 0.3
+
+
+@pytest.mark.parametrize("how", ["data", "numpy", "detach", "inplace", "joints_data", "pose_numpy"])
+def test_edited_output_is_re_encoded(setup, tiny_config, how):
+    b, vol = setup
+    with torch.no_grad():
+        out = b(**random_pose(1, seed=21))
+    pts = _points(out)
+    with torch.no_grad():
+        before = vol.query(out, pts)
+        _edit_output(out, how)
+        after = vol.query(out, pts)
+    expect = _reference(vol, tiny_config, out, pts)
+    assert not torch.allclose(expect, before, atol=1e-4)  # the edit changes the field
+    assert torch.allclose(after, expect, atol=1e-6)
+
+
+def test_edited_output_with_gradients(setup, tiny_config):
+    """An output that carries a graph, edited through .data between two queries."""
+    b, vol = setup
+    pose = random_pose(1, seed=22)
+    pose["body_pose"].requires_grad_(True)
+    out = b(**pose)
+    pts = _points(out)
+    before = vol.query(out, pts).detach()
+    out.vertices.data.add_(0.02)
+    after = vol.query(out, pts)
+    after.sum().backward()  # still differentiable
+    expect = _reference(vol, tiny_config, out, pts)
+    assert not torch.allclose(expect, before, atol=1e-4)
+    assert torch.allclose(after.detach(), expect, atol=1e-6)
+
+
+@pytest.mark.parametrize("how", ["data", "numpy", "no_grad_inplace", "load_state_dict", "buffer"])
+def test_weight_edits_invalidate(tiny_config, how):
+    torch.manual_seed(4)
+    b = volsmpl.create_body()
+    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).eval()
+    p = random_pose(1, seed=23)
+    with torch.no_grad():
+        out = b(**p)
+    pts = _points(out)
+    with torch.no_grad():
+        before = vol.query(out, pts)
+        params = list(vol.net.parameters())
+        if how == "data":
+            for q in params:
+                q.data.mul_(1.1)
+        elif how == "numpy":
+            for q in params:
+                q.detach().numpy()[...] *= 1.1
+        elif how == "no_grad_inplace":
+            for q in params:
+                q.mul_(1.1)
+        elif how == "load_state_dict":
+            other = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=tiny_config)
+            vol.net.load_state_dict(other.net.state_dict())
+        elif how == "buffer":  # the encoder's fixed surface samples (a partition buffer): all on one face per part
+            faces = vol.partition.sample_faces
+            faces.data.copy_(faces[:, :1].expand_as(faces))
+        same_object = vol.query(out, pts)
+        equal_new_output = vol.query(b(**p), pts)  # the value-reuse path (equal constant output)
+    expect = _reference(vol, tiny_config, out, pts)
+    assert not torch.allclose(expect, before, atol=1e-4)
+    assert torch.allclose(same_object, expect, atol=1e-6)
+    assert torch.allclose(equal_new_output, expect, atol=1e-6)
+
+
+def test_selfpen_and_parts_follow_edits(setup, tiny_config):
+    """query_parts and selfpen_loss read the same cache."""
+    b, vol = setup
+    with torch.no_grad():
+        out = b(**random_pose(1, seed=24))
+    pts = _points(out)
+    with torch.no_grad():
+        parts_before = vol.query_parts(out, pts)
+        out.vertices.data.add_(0.02)
+        parts_after = vol.query_parts(out, pts)
+    copy = SimpleNamespace(**{n: getattr(out, n).clone() for n in ("vertices", "joints", "full_pose")})
+    with torch.no_grad():
+        assert torch.allclose(parts_after, vol.query_parts(copy, pts), atol=1e-6)
+        assert not torch.allclose(parts_after, parts_before, atol=1e-4)
+        g = torch.Generator().manual_seed(0)
+        loss = vol.selfpen_loss(out, generator=g)
+        out.vertices.data.mul_(0.0).add_(copy.vertices * 1.05)
+        loss2 = vol.selfpen_loss(out, generator=torch.Generator().manual_seed(0))
+        copy.vertices.mul_(1.05)
+        assert torch.allclose(loss2, vol.selfpen_loss(copy, generator=torch.Generator().manual_seed(0)), atol=1e-6)
+    del loss
+
+
+def test_two_volumes_never_share(tiny_config):
+    """One output queried by two volumes with different weights: each answers with its own weights."""
+    b = volsmpl.create_body()
+    torch.manual_seed(5)
+    v1 = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).eval()
+    torch.manual_seed(6)
+    v2 = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=tiny_config).eval()
+    with torch.no_grad():
+        out = b(**random_pose(1, seed=25))
+        pts = _points(out)
+        a1, a2 = v1.query(out, pts), v2.query(out, pts)
+        assert torch.equal(v1.query(out, pts), a1) and torch.equal(v2.query(out, pts), a2)
+    assert torch.allclose(a2, _reference(v2, tiny_config, out, pts), atol=1e-6)
+
+
+def test_fingerprint_detects_single_bit_and_swaps():
+    x = torch.randn(1001)
+    base = fingerprint([x])
+    for i in (0, 500, 1000):
+        y = x.clone()
+        y.view(torch.int32)[i] ^= 1  # the lowest mantissa bit
+        assert fingerprint([y]) != base
+    y = x.clone()
+    y[[3, 7]] = y[[7, 3]]
+    assert fingerprint([y]) != base
+    assert fingerprint([x.double()]) != base and fingerprint([x.reshape(7, 143)]) != base
+    assert fingerprint([x[1:]]) == fingerprint([x[1:].clone()])  # unaligned views read like copies
