@@ -4,15 +4,21 @@ A checkpoint ``<path>`` is the pair ``<path>.safetensors`` (the state dict) and 
 
     {"format": "volsmpl-checkpoint", "version": 1,
      "config": {...network config, e.g. VolumeConfig.to_dict()...},
-     "meta":   {"body_fingerprint": "...", "parts": ..., "training": ...}}
+     "meta":   {"body_fingerprint": "...", "parts": ..., "training": ...},
+     "digests": {"weights": "sha256:...", "config": "sha256:..."}}
 
 Both files are written to temporary names and moved into place with ``os.replace`` so a crash
-never leaves a half-written checkpoint under the final name.
+never leaves a half-written checkpoint under the final name. On load the digests are verified (the
+config's also when only the JSON is read) and non-finite weights are refused, each with a message naming
+the file. A checkpoint without digests (written before they were recorded) loads with a warning that it
+cannot be verified; ``add_digests(path)`` records them for the files as they are.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import warnings
 from typing import Any, Dict, Optional, Tuple
 
 import torch
@@ -20,6 +26,7 @@ import torch
 FORMAT = "volsmpl-checkpoint"
 VERSION = 1
 FINGERPRINT_KEY = "body_fingerprint"
+DIGESTS_KEY = "digests"
 
 _HOWTO = ("download the released checkpoint or train one with `volsmpl train ...` "
           "(see `volsmpl train --help`)")
@@ -27,6 +34,31 @@ _HOWTO = ("download the released checkpoint or train one with `volsmpl train ...
 
 class CheckpointError(RuntimeError):
     """A checkpoint is missing, corrupt, of an unknown format, or trained for another body."""
+
+
+def weights_digest(state_dict: Dict[str, torch.Tensor]) -> str:
+    """sha256 of a state dict: every tensor's name, dtype, shape and bytes, in name order."""
+    h = hashlib.sha256()
+    for k in sorted(state_dict):
+        t = state_dict[k].detach().to("cpu").contiguous()
+        h.update(f"{k}|{t.dtype}|{tuple(t.shape)}\n".encode())
+        h.update(t.reshape(-1).view(torch.uint8).numpy())
+    return "sha256:" + h.hexdigest()
+
+
+def config_digest(config: Dict[str, Any]) -> str:
+    """sha256 of a config dict in canonical JSON (sorted keys, no spaces)."""
+    text = json.dumps(config, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
+
+
+def _non_finite(state_dict: Dict[str, torch.Tensor]) -> Optional[str]:
+    """'name (n of m entries)' of the first floating tensor with NaN or inf entries, else None."""
+    for k in sorted(state_dict):
+        t = state_dict[k]
+        if (t.is_floating_point() or t.is_complex()) and not bool(torch.isfinite(t).all()):
+            return f"'{k}' ({int((~torch.isfinite(t)).sum())} of {t.numel()} entries)"
+    return None
 
 
 def checkpoint_paths(path: str | os.PathLike) -> Tuple[str, str]:
@@ -60,8 +92,13 @@ def save_checkpoint(path: str | os.PathLike, state_dict: Dict[str, torch.Tensor]
             raise TypeError(f"save_checkpoint: state_dict['{k}'] is a {type(v).__name__}, only tensors can be "
                             "stored; put other values into `meta`")
         tensors[k] = v.detach().to("cpu").contiguous().clone()
+    bad = _non_finite(tensors)
+    if bad is not None:
+        raise ValueError(f"save_checkpoint: {bad} of the weights are NaN or inf (training diverged?); "
+                         f"nothing written to {st_path}. Lower the learning rate or resume from an earlier checkpoint.")
     try:
-        doc = json.dumps({"format": FORMAT, "version": VERSION, "config": config, "meta": meta},
+        digests = {"weights": weights_digest(tensors), "config": config_digest(config)}
+        doc = json.dumps({"format": FORMAT, "version": VERSION, "config": config, "meta": meta, DIGESTS_KEY: digests},
                          indent=2, sort_keys=True, allow_nan=False)
     except (TypeError, ValueError) as e:
         raise TypeError(f"save_checkpoint: config/meta must be JSON-serialisable (plain dicts, lists, "
@@ -137,6 +174,16 @@ def load_checkpoint(path: str | os.PathLike, expected_fingerprint: Optional[str]
         if not isinstance(doc.get(key), dict):
             raise CheckpointError(f"checkpoint file {js_path} is corrupt: '{key}' must be an object.")
     config, meta = doc["config"], doc["meta"]
+    digests = doc.get(DIGESTS_KEY)
+    if digests is None:
+        warnings.warn(f"checkpoint {js_path} records no digests (written before volsmpl recorded them), so damaged "
+                      "weights or an edited config cannot be detected; record them for the files as they are with "
+                      "volsmpl.checkpoint.add_digests(path).", stacklevel=2)
+    elif not (isinstance(digests, dict) and all(isinstance(digests.get(k), str) for k in ("weights", "config"))):
+        raise CheckpointError(f"checkpoint file {js_path} is corrupt: '{DIGESTS_KEY}' must hold 'weights' and 'config' strings.")
+    elif digests["config"] != config_digest(config):
+        raise CheckpointError(f"checkpoint file {js_path}: its config differs from the one it was saved with (config "
+                              f"digest mismatch: the JSON was edited or damaged); re-save or re-download it, or {_HOWTO}.")
 
     if expected_fingerprint is not None:
         fp = meta.get(FINGERPRINT_KEY)
@@ -155,4 +202,41 @@ def load_checkpoint(path: str | os.PathLike, expected_fingerprint: Optional[str]
     except (SafetensorError, OSError, ValueError, RuntimeError) as e:
         raise CheckpointError(f"checkpoint file {st_path} is corrupt or truncated ({e}); "
                               f"re-save or re-download it, or {_HOWTO}.") from e
+    if digests is not None and weights_digest(state_dict) != digests["weights"]:
+        raise CheckpointError(f"checkpoint file {st_path} does not match the weights digest recorded in {js_path} "
+                              f"(damaged bytes, or the tensor file of another checkpoint); re-save or re-download it, "
+                              f"or {_HOWTO}.")
+    bad = _non_finite(state_dict)
+    if bad is not None:
+        raise CheckpointError(f"checkpoint file {st_path} holds NaN or inf weights in {bad}: the training diverged "
+                              f"or the file is damaged; use an earlier checkpoint, or {_HOWTO}.")
     return state_dict, config, meta
+
+
+def add_digests(path: str | os.PathLike) -> str:
+    """Record the digests of a checkpoint's weights and config as they are now (for a checkpoint written before
+    digests existed; the weights file is not changed). The weights must be finite. Returns the JSON path."""
+    from safetensors.torch import load_file
+
+    st_path, js_path = checkpoint_paths(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        _, config, _ = load_checkpoint(path, weights=False)
+    with open(js_path) as f:
+        doc = json.load(f)
+    state = load_file(st_path)
+    bad = _non_finite(state)
+    if bad is not None:
+        raise CheckpointError(f"checkpoint file {st_path} holds NaN or inf weights in {bad}; no digests recorded.")
+    doc[DIGESTS_KEY] = {"weights": weights_digest(state), "config": config_digest(config)}
+    tmp = js_path + f".tmp{os.getpid()}"
+    try:
+        with open(tmp, "w") as f:
+            f.write(json.dumps(doc, indent=2, sort_keys=True, allow_nan=False))
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, js_path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+    return js_path

@@ -128,3 +128,91 @@ def test_config_dict_round_trip_and_unknown_keys():
         VolumeConfig.from_dict({**d, "nope": 1})
     with pytest.raises(ValueError, match="skip_layers"):
         VolumeConfig(skip_layers=(9,))
+
+
+# ---------------------------------------------------------------- digests and non-finite weights (issue 27)
+def test_damaged_weights_same_size_refused(tmp_path):
+    _save(tmp_path)
+    p = tmp_path / "model.safetensors"
+    data = bytearray(p.read_bytes())
+    data[-3] ^= 0x40  # one byte of the last tensor's data: same size, still parses
+    p.write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match=r"model\.safetensors does not match the weights digest"):
+        load_checkpoint(tmp_path / "model")
+
+
+def test_swapped_tensor_file_refused(tmp_path):
+    _save(tmp_path / "a")
+    sd = {"a.weight": torch.randn(3, 4), "b": torch.arange(5), "c": torch.randn(2, 2)}
+    save_checkpoint(tmp_path / "b" / "model", sd, VolumeConfig(nbw_rank=4).to_dict(), {})
+    os.replace(tmp_path / "b" / "model.safetensors", tmp_path / "a" / "model.safetensors")
+    with pytest.raises(CheckpointError, match="weights digest"):
+        load_checkpoint(tmp_path / "a" / "model")
+
+
+@pytest.mark.parametrize("key,value", [("normalize_parts", True), ("box_padding", 0.2), ("n_surface_samples", 256)])
+def test_edited_config_refused(tmp_path, key, value):
+    _save(tmp_path)
+    p = tmp_path / "model.json"
+    doc = json.loads(p.read_text())
+    assert doc["config"][key] != value
+    doc["config"][key] = value
+    p.write_text(json.dumps(doc))
+    for weights in (True, False):
+        with pytest.raises(CheckpointError, match=r"model\.json: its config differs .* digest mismatch"):
+            load_checkpoint(tmp_path / "model", weights=weights)
+
+
+def test_non_finite_weights_refused(tmp_path):
+    from safetensors.torch import save_file
+    with pytest.raises(ValueError, match=r"'w' \(1 of 4 entries\) .* NaN or inf"):
+        save_checkpoint(tmp_path / "m", {"w": torch.tensor([0.0, float("nan"), 1.0, 2.0])}, {}, {})
+    assert not os.listdir(tmp_path)  # nothing written
+    # a file written by other means (no digests: the legacy path) holding inf
+    save_checkpoint(tmp_path / "m", {"w": torch.zeros(4)}, {}, {})
+    save_file({"w": torch.tensor([0.0, float("inf"), 1.0, 2.0])}, str(tmp_path / "m.safetensors"))
+    doc = json.loads((tmp_path / "m.json").read_text())
+    del doc["digests"]
+    (tmp_path / "m.json").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match="records no digests"):
+        with pytest.raises(CheckpointError, match=r"m\.safetensors holds NaN or inf weights in 'w' \(1 of 4"):
+            load_checkpoint(tmp_path / "m")
+
+
+def test_legacy_checkpoint_without_digests(tmp_path):
+    """Loads with a warning (cannot be verified); add_digests records them, after which edits are caught."""
+    from volsmpl.checkpoint import add_digests
+    sd, cfg, meta = _save(tmp_path)
+    p = tmp_path / "model.json"
+    doc = json.loads(p.read_text())
+    del doc["digests"]
+    p.write_text(json.dumps(doc))
+    with pytest.warns(UserWarning, match=r"model\.json records no digests.*add_digests"):
+        sd2, _, _ = load_checkpoint(tmp_path / "model")
+    assert torch.equal(sd2["a.weight"], sd["a.weight"])
+    weights_before = (tmp_path / "model.safetensors").read_bytes()
+    add_digests(tmp_path / "model")
+    assert (tmp_path / "model.safetensors").read_bytes() == weights_before
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_checkpoint(tmp_path / "model")
+    doc = json.loads(p.read_text())
+    doc["config"]["box_padding"] = 0.3
+    p.write_text(json.dumps(doc))
+    with pytest.raises(CheckpointError, match="digest mismatch"):
+        load_checkpoint(tmp_path / "model")
+
+
+@pytest.mark.parametrize("kind", ["volsmpl", "coap"])
+def test_shipped_checkpoints_carry_digests(kind):
+    """The shipped checkpoints load verified (no legacy warning) and their digests match their weights."""
+    import warnings
+    from volsmpl.checkpoint import config_digest, weights_digest
+    from volsmpl.models import model_kind
+    path = model_kind(kind).default_checkpoint
+    doc = json.loads(open(checkpoint_paths(path)[1]).read())
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sd, cfg, _ = load_checkpoint(path)
+    assert doc["digests"] == {"weights": weights_digest(sd), "config": config_digest(cfg)}
