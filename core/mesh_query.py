@@ -18,7 +18,9 @@ Culling (exact, conservative): faces are sorted along a Morton curve of their ce
     once per edge in a canonical order (lower vertex index first) and breaks ties by simulation of simplicity (the
     point moved by (e, e^2)), so a ray through an edge or a vertex is counted exactly once: for a closed, consistently
     oriented mesh the count is the exact integer winding number of every point not on the surface (1 inside,
-    0 outside, 2 in a self-overlap), with no vote over rays.
+    0 outside, 2 in a self-overlap), with no vote over rays. Edge functions are evaluated on corners taken
+    relative to the point, (a - p) x (b - p): a ray that passes within rounding of a vertex sees the same
+    offset from it in every edge there, so the faces around the vertex agree on which one it crosses.
 
 Memory: work is done in blocks of at most `chunk` point-triangle (or point-cluster) pairs, about 0.6 kB each
 in float64 (~0.6 GB at the default 2^20), whatever the number of points. Cost: O(N * F / cluster_size) for
@@ -254,9 +256,9 @@ class MeshQuery:
     def _cluster_crossings(self, p: torch.Tensor, ci: torch.Tensor) -> torch.Tensor:
         """Crossings (P, M) in {-1, 0, +1} of the +z rays from ray-frame points p (P, 3) with the faces of clusters ci."""
         a, b, sgn = self.edge_a[ci], self.edge_b[ci], self.edge_s[ci]  # (P, M, 3, 2), (P, M, 3)
-        px, py = p[:, None, None, 0], p[:, None, None, 1]
-        ax, ay, bx, by = a[..., 0], a[..., 1], b[..., 0], b[..., 1]
-        e = (bx - ax) * (py - ay) - (by - ay) * (px - ax)  # canonical edge functions (P, M, 3)
+        ax, ay = a[..., 0] - p[:, None, None, 0], a[..., 1] - p[:, None, None, 1]  # corners relative to the point:
+        bx, by = b[..., 0] - p[:, None, None, 0], b[..., 1] - p[:, None, None, 1]  # one rounding per corner, shared
+        e = ax * by - ay * bx  # canonical edge functions (P, M, 3): (a - p) x (b - p) = (b - a) x (p - a)
         side = _sos_sign(e, ax, ay, bx, by) * sgn  # sign of each directed edge of the face
         inside = (side[..., 0] == side[..., 1]) & (side[..., 1] == side[..., 2]) & self.valid[ci]
         lam = e * sgn  # lam_k of edge k is the weight of the opposite vertex (k + 2) % 3

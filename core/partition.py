@@ -193,19 +193,26 @@ class Partition(torch.nn.Module):
 
     # ------------------------------------------------------------------ surface samples
     def _draw(self, vertices: torch.Tensor, generator) -> tuple[torch.Tensor, torch.Tensor]:
-        """Area-weighted face ids (B, K, n) and barycentrics (B, K, n, 3) on each body's own mesh."""
+        """Area-weighted face ids (B, K, n) and barycentrics (B, K, n, 3) on each body's own mesh.
+
+        The draws happen on the generator's device (the vertices' device without one), so a seed gives the
+        same samples for vertices on any device with a CPU generator, and device-native draws (no host round
+        trip) with a generator on the vertices' device; the results are returned on the vertices' device.
+        Shape: vertices (B, V, 3) -> face ids (B, K, n) int64, barycentrics (B, K, n, 3) in the vertices' dtype.
+        """
         B = vertices.shape[0]
+        dev = generator.device if generator is not None else vertices.device
         n_t = self.n_samples // 2
         out_f = []
         for pad, mask, n in ((self._tight_pad, self._tight_mask, n_t), (self._ext_pad, self._ext_mask, self.n_samples - n_t)):
             areas = triangle_areas(vertices.detach(), self.faces[pad])  # (B, K, L)
             areas = torch.where(mask, areas, torch.zeros_like(areas)).clamp_min(0)
-            probs = areas.reshape(B * self.num_parts, -1).to(torch.float64)
+            probs = areas.reshape(B * self.num_parts, -1).to(dev, torch.float64)
             idx = torch.multinomial(probs, n, replacement=True, generator=generator)
-            out_f.append(torch.gather(pad.repeat(B, 1), 1, idx).reshape(B, self.num_parts, n))
+            out_f.append(torch.gather(pad.to(dev).repeat(B, 1), 1, idx).reshape(B, self.num_parts, n))
         f_ids = torch.cat(out_f, dim=-1)
-        bary = uniform_barycentric(f_ids.shape, generator=generator, dtype=torch.float64)
-        return f_ids, bary.to(vertices.dtype)
+        bary = uniform_barycentric(f_ids.shape, generator=generator, dtype=torch.float64, device=dev)
+        return f_ids.to(vertices.device), bary.to(vertices.device, vertices.dtype)
 
     def surface_points(self, vertices: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
         """Per-part surface samples of posed bodies (world frame).

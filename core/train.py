@@ -40,7 +40,8 @@ Data of step s on rank r depend only on (seed, s, r), so a resumed run continues
 processes can make batches ahead of the step (DataLoader workers, one torch thread each) with the same result:
 on a GPU machine the exact ground truth (CPU) would otherwise starve the GPU. Checkpoints
 (model + optimiser, safetensors; nothing pickled) are written to <out>/ckpt-<step>/ and published by
-atomically replacing <out>/latest; <out>/log.csv holds the losses. Multi-process: torchrun (DDP, gloo on
+atomically replacing <out>/latest; <out>/log.csv holds the losses, <out>/profile.jsonl the time breakdown of
+the logged steps (batch, ground truth, forward+backward, optimiser: `volsmpl.train_batches.StepProfile`). Multi-process: torchrun (DDP, gloo on
 CPU, nccl on CUDA).
 
 This module holds the losses, the step, checkpointing/resume, the loop and the CLI; the configuration is in
@@ -66,7 +67,7 @@ from .attach import attach_volume
 from .body.model import create_body
 from .checkpoint import load_checkpoint, save_checkpoint
 from .models import model_kind
-from .train_batches import batch_stream
+from .train_batches import StepProfile, batch_stream, write_profile
 from .train_config import TrainConfig, lr_at
 
 
@@ -136,7 +137,7 @@ class TrainStep(torch.nn.Module):
 
     def forward(self, batch: dict):
         out = SimpleNamespace(**batch["posed"])  # posed once, by make_batch
-        g = torch.Generator().manual_seed(batch["seed"])
+        g = torch.Generator(device=batch["points"].device).manual_seed(batch["seed"])  # draws stay on the device
         enc = self._volume.encode(out, generator=g)  # fresh surface samples: augmentation
         pred = self._volume.query_encoded(enc, batch["points"])
         if model_kind(self._volume.kind).train_loss == "sdf":
@@ -311,7 +312,8 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         if rank == 0 and not quiet:
             print(f"{out_dir}: {spent / 3600:.2f} h of training already reach the budget of {max_seconds / 3600:.2f} h")
     # workers fork before the model moves to a GPU; they get a CPU copy of the partition
-    batches = batch_stream(cfg, body, copy.deepcopy(volume.partition).cpu(), start, end, rank)
+    batches = batch_stream(cfg, body, copy.deepcopy(volume.partition).cpu(), start, end, rank,
+                           device=None if cfg.num_workers else device)  # made on the device unless by CPU workers
     volume.to(device)
     volume.train()
     ema = WeightEMA(volume.net, cfg.ema_decay, ema_state, ema_updates) if cfg.ema_decay else None
@@ -330,6 +332,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     if new_log:
         writer.writerow(["step", "loss", "sign", "abs", "lr", "sec_per_step", "data_sec"])
     t0, losses, last = time.time(), [], {}
+    step_profile = StepProfile()
     for step in range(start, end):
         td = time.time()
         batch = next(batches)
@@ -340,12 +343,16 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
         for g_ in opt.param_groups:
             g_["lr"] = lr_at(cfg, step)
         opt.zero_grad(set_to_none=True)
+        tf = time.perf_counter()
         loss, parts = _accumulate(model, batch, cfg.micro_batch, world > 1)
+        tf = time.perf_counter() - tf
         if not math.isfinite(loss):  # before the update, so the last checkpoint stays sound
             raise RuntimeError(f"loss became {loss} at step {step}; lower the learning rate or check the data.")
+        to = time.perf_counter()
         opt.step()
         if ema is not None:
             ema.update(volume.net)
+        step_profile(batch, data_sec, tf, to, device)
         losses.append(loss)
         last = {"step": step + 1, "loss": loss, **parts}
         if rank == 0 and ((step + 1) % cfg.log_every == 0 or step + 1 == end):
@@ -353,6 +360,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
             writer.writerow([step + 1, f"{loss:.6g}", f"{parts['sign']:.6g}", f"{parts['abs']:.6g}",
                              f"{lr_at(cfg, step):.3g}", f"{sps:.3f}", f"{data_sec:.3f}"])
             logf.flush()
+            write_profile(out_dir / "profile.jsonl", step + 1, step_profile.last)
             if not quiet:
                 eta = (cfg.steps - step - 1) * sps / 3600
                 print(f"\rstep {step + 1}/{cfg.steps} loss {loss:.4f} (sign {parts['sign']:.4f}, abs {parts['abs']:.4f}) "

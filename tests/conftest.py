@@ -16,6 +16,8 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         if "needs_checkpoint" in item.keywords and not has_ckpt:
             item.add_marker(pytest.mark.skip(reason="no shipped checkpoint yet (trained by `volsmpl train`)"))
+        if item.get_closest_marker("cuda") is not None and not torch.cuda.is_available():
+            item.add_marker(pytest.mark.skip(reason="no CUDA GPU"))
 
 
 @pytest.fixture(scope="session")

@@ -504,3 +504,94 @@ def test_surface_samples_uniform_on_a_triangle():
     assert (lam > -1e-12).all()
     assert torch.allclose(lam.mean(0), torch.full((3,), 1 / 3, dtype=torch.float64), atol=0.01)
     assert torch.allclose((lam ** 2).mean(0), torch.full((3,), 1 / 6, dtype=torch.float64), atol=0.01)
+
+
+# ------------------------------------------------------------------ the torch backend (MeshQuery, batch_sdf)
+def _shapes(cube, sphere):
+    L = trimesh.util.concatenate([trimesh.creation.box((1, 1, 1)),
+                                  trimesh.creation.box((1, 1, 1), transform=trimesh.transformations.translation_matrix((0.5, 0.5, 0)))])
+    return {"cube": cube, "sphere": sphere, "overlap": (np.asarray(L.vertices), np.asarray(L.faces))}
+
+
+@pytest.mark.parametrize("shape", ["cube", "sphere", "overlap"])
+def test_mesh_query_against_brute_force_and_winding(shape, cube, sphere, rng):
+    """Exact distances (brute force over every triangle) and integer winding numbers (our float64 solid angles;
+    2 inside the overlap of two boxes) for points away from the surface, rays through vertices included."""
+    from volsmpl.mesh_query import RAY_DIRECTION, MeshQuery
+    v, f = _shapes(cube, sphere)[shape]
+    p = rng.uniform(-0.9, 1.4, (600, 3))
+    d = np.asarray(RAY_DIRECTION)
+    p = np.concatenate([p, v - 0.3 * d, v + 0.3 * d, 0.5 * (v[f[:, 0]] + v[f[:, 1]]) - 0.2 * d])  # rays through vertices/edges
+    mq = MeshQuery(torch.as_tensor(v), torch.as_tensor(f), cluster_size=4, chunk=64)
+    dist = mq.distances(torch.as_tensor(p)).numpy()
+    assert np.abs(dist - brute_distance(p, v, f)).max() < 1e-9
+    w_ref = np.round(gt.winding_number_reference(v, f, p))
+    keep = off_surface(p, v, f)
+    assert keep.sum() > 500
+    assert np.array_equal(mq.winding_numbers(torch.as_tensor(p)).numpy()[keep], w_ref[keep])
+
+
+def test_mesh_query_chunk_bound_does_not_change_results(sphere, rng):
+    from volsmpl.mesh_query import MeshQuery
+    v, f = (torch.as_tensor(x) for x in sphere)
+    p = torch.as_tensor(rng.uniform(-0.8, 0.8, (300, 3)))
+    a, b = MeshQuery(v, f), MeshQuery(v, f, cluster_size=8, chunk=16)
+    assert torch.equal(a.nearest_faces(p), b.nearest_faces(p))
+    assert torch.equal(a.crossings(p)[0], b.crossings(p)[0]) and torch.equal(a.crossings(p)[1], b.crossings(p)[1])
+    with pytest.raises(ValueError, match="chunk"):
+        MeshQuery(v, f, cluster_size=32, chunk=8)
+    with pytest.raises(ValueError, match="NaN"):
+        a.nearest_faces(torch.full((2, 3), float("nan"), dtype=torch.float64))
+
+
+@needs_o3d
+@pytest.mark.parametrize("sign", ["ray_winding", "raycast"])
+def test_torch_backend_matches_open3d_on_self_contact_bodies(default_body_mesh, sign):
+    """batch_sdf(backend='torch') against open3d (distance, ray-winding or parity sign) and libigl's exact winding
+    number on posed default bodies in self-contact: equal signs farther than 1 mm from the surface, |d| to 1e-6 m."""
+    from volsmpl.body.poses import named_pose
+    body, _ = default_body_mesh
+    with torch.no_grad():
+        verts = body(body_pose=torch.cat([named_pose("arms_crossed"), named_pose("squatting")])).vertices.double()
+    g = torch.Generator().manual_seed(1)
+    lo, hi = verts.amin(1, keepdim=True) - 0.05, verts.amax(1, keepdim=True) + 0.05
+    idx = torch.randint(verts.shape[1], (2, 1500), generator=g)
+    pts = torch.cat([lo + torch.rand(2, 1500, 3, generator=g, dtype=torch.float64) * (hi - lo),
+                     torch.gather(verts, 1, idx[..., None].expand(-1, -1, 3))
+                     + 0.01 * torch.randn(2, 1500, 3, generator=g, dtype=torch.float64)], dim=1)
+    ref = gt.batch_mesh_sdf(verts, body.faces, pts, sign=sign, nsamples=3)
+    ours = gt.batch_sdf(verts, body.faces, pts, sign=sign, backend="torch")
+    assert ours.dtype == pts.dtype and ours.shape == (2, 3000)
+    far = ref.abs() > 1e-3
+    assert far.float().mean() > 0.85
+    assert torch.equal(ours[far] < 0, ref[far] < 0)
+    assert (ours.abs() - ref.abs()).abs().max() < 1e-6
+    if sign == "ray_winding":
+        w = torch.stack([torch.as_tensor(gt.winding_number(verts[i], body.faces, pts[i])) for i in range(2)])
+        assert torch.equal(ours[far] < 0, w[far] > 0.5)
+        assert (w > 1.5).any()  # the poses do overlap themselves: points inside two parts at once
+
+
+def test_resolve_gt_backend_and_batch_sdf_types(cube):
+    assert gt.resolve_gt_backend("auto", "cuda") == "torch" and gt.resolve_gt_backend("torch", "cpu") == "torch"
+    if HAS_O3D:
+        assert gt.resolve_gt_backend("auto", torch.device("cpu")) == "open3d"
+    with pytest.raises(ValueError, match="gt_backend"):
+        gt.resolve_gt_backend("bvh", "cpu")
+    v, f = cube
+    p = np.array([[[0.0, 0, 0], [1.0, 0, 0]]])
+    out = gt.batch_sdf(v[None], f, p, backend="torch")
+    assert isinstance(out, np.ndarray) and np.allclose(out, [[-0.5, 0.5]])
+    out = gt.batch_sdf(torch.as_tensor(v[None]), f, torch.as_tensor(p, dtype=torch.float32), backend="torch")
+    assert out.dtype == torch.float32 and torch.allclose(out, torch.tensor([[-0.5, 0.5]]))
+    with pytest.raises(ValueError, match="not closed"):
+        gt.batch_sdf(v[None], f[:-1], p, backend="torch")
+
+
+@pytest.mark.cuda
+def test_torch_backend_on_cuda_matches_cpu(sphere, rng):
+    v, f = sphere
+    p = torch.as_tensor(rng.uniform(-0.8, 0.8, (1, 2000, 3)))
+    cpu = gt.batch_sdf(torch.as_tensor(v)[None], f, p, backend="torch")
+    gpu = gt.batch_sdf(torch.as_tensor(v)[None].cuda(), f, p.cuda(), backend="auto")
+    assert gpu.device.type == "cuda" and torch.allclose(gpu.cpu(), cpu, atol=1e-12)

@@ -158,3 +158,31 @@ def test_wrong_pose_size(body, part):
     out = body()
     with pytest.raises(ValueError, match="do not fit"):
         part.part_transforms(out.full_pose[:, :66], out.joints)
+
+
+def test_draws_follow_the_generator_device(body, part):
+    """A CPU generator given as torch.device('cpu') draws what the default generator draws; results sit on the
+    vertices' device in their dtype."""
+    v = body(**random_pose(2, seed=3)).vertices.detach()
+    a = part.surface_points(v, torch.Generator().manual_seed(7))
+    b = part.surface_points(v, torch.Generator(device=torch.device("cpu")).manual_seed(7))
+    assert torch.equal(a, b) and a.dtype == v.dtype and a.device == v.device
+    assert not torch.equal(a, part.surface_points(v, torch.Generator().manual_seed(8)))
+
+
+@pytest.mark.cuda
+def test_draws_on_cuda(body, part):
+    """CUDA vertices: a CPU generator gives the CPU samples (moved), a CUDA generator deterministic CUDA samples."""
+    v = body(**random_pose(2, seed=3)).vertices.detach()
+    pc = part.to("cuda")
+    try:
+        vc = v.cuda()
+        a = pc.surface_points(vc, torch.Generator().manual_seed(7))
+        assert a.device.type == "cuda"
+        assert torch.allclose(a.cpu(), part.cpu().surface_points(v, torch.Generator().manual_seed(7)), atol=1e-6)
+        pc = part.to("cuda")
+        b = pc.surface_points(vc, torch.Generator(device="cuda").manual_seed(7))
+        c = pc.surface_points(vc, torch.Generator(device="cuda").manual_seed(7))
+        assert b.device.type == "cuda" and torch.equal(b, c)
+    finally:
+        part.cpu()

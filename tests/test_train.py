@@ -297,3 +297,76 @@ def test_worker_processes_give_the_serial_batches(tmp_path):
     assert workers["losses"] == pytest.approx(serial["losses"], rel=1e-6, abs=1e-8)
     with pytest.raises(ValueError, match="num_workers"):
         TrainConfig(num_workers=-1)
+
+
+# ------------------------------------------------------------------ training on any device (issue 26, items 1-2)
+def test_torch_ground_truth_batch_matches_open3d(body):
+    """gt_backend='torch' gives the open3d batch: same points, exact signs away from the surface, distances to 1e-6 m."""
+    pytest.importorskip("open3d")
+    cfg = tiny_cfg(gt_backend="open3d")
+    part = volsmpl.Partition(body)
+    a = make_batch(cfg, body, part, 3)
+    b = make_batch(dataclasses.replace(cfg, gt_backend="torch"), body, part, 3)
+    assert torch.equal(a["points"], b["points"]) and b["sdf"].dtype == a["sdf"].dtype
+    far = a["sdf"].abs() > 1e-3
+    assert torch.equal(a["sdf"][far] < 0, b["sdf"][far] < 0)
+    assert (a["sdf"].abs() - b["sdf"].abs()).abs().max() < 1e-6
+    assert set(b["timing"]) == {"make_s", "gt_s"} and 0 <= b["timing"]["gt_s"] <= b["timing"]["make_s"]
+
+
+def test_batches_build_without_open3d(body, monkeypatch, tmp_path):
+    """With open3d unimportable, 'auto' takes the torch ground truth and training batches (and steps) still run."""
+    import sys
+    from volsmpl.groundtruth import resolve_gt_backend
+    monkeypatch.setitem(sys.modules, "open3d", None)  # `import open3d` raises ImportError
+    assert resolve_gt_backend("auto", "cpu") == "torch"
+    with pytest.raises(ImportError, match="gt_backend='torch'"):
+        resolve_gt_backend("open3d", "cpu")
+    cfg = tiny_cfg()
+    batch = make_batch(cfg, body, volsmpl.Partition(body), 2)
+    assert batch["sdf"].shape == batch["points"].shape[:2] and torch.isfinite(batch["sdf"]).all()
+    assert (batch["sdf"] < 0).any() and (batch["sdf"] > 0).any()
+    res = train(cfg, tmp_path / "r", max_steps=2, quiet=True)
+    assert res["step"] == 2 and all(math.isfinite(x) for x in res["losses"])
+
+
+def test_profile_log_has_the_step_breakdown(tmp_path):
+    train(tiny_cfg(gt_backend="torch"), tmp_path / "p", max_steps=2, quiet=True)
+    rows = [json.loads(x) for x in (tmp_path / "p" / "profile.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in rows] == [1, 2]
+    for r in rows:
+        assert r["device"] == "cpu" and 0 <= r["gt_s"] <= r["make_s"] <= r["data_s"] + 1e-3
+        assert r["step_s"] == pytest.approx(r["data_s"] + r["fwd_bwd_s"] + r["opt_s"], abs=1e-5)
+        assert 0 < r["gt_share"] < 1
+
+
+def test_batch_on_an_explicit_cpu_device_is_the_default_batch(body):
+    from volsmpl.train_batches import batch_stream
+    cfg = tiny_cfg()
+    part = volsmpl.Partition(body)
+    a = next(batch_stream(cfg, body, part, 4, 5))
+    b = next(batch_stream(cfg, body, part, 4, 5, device=torch.device("cpu")))
+    assert torch.equal(a["points"], b["points"]) and torch.equal(a["sdf"], b["sdf"])
+    with pytest.raises(ValueError, match="num_workers=0"):
+        batch_stream(dataclasses.replace(cfg, num_workers=1), body, part, 0, 1, device="meta")
+
+
+@pytest.mark.cuda
+def test_batches_stay_on_cuda(body):
+    from volsmpl.train_batches import batch_stream
+    cfg = tiny_cfg(gt_backend="auto")
+    b = next(batch_stream(cfg, body, volsmpl.Partition(body), 0, 1, device="cuda"))
+    tensors = [b["points"], b["sdf"], *b["params"].values(), *b["posed"].values()]
+    assert all(t.device.type == "cuda" for t in tensors)
+    c = next(batch_stream(cfg, body, volsmpl.Partition(body), 0, 1, device="cuda"))
+    assert torch.equal(b["points"], c["points"]) and torch.equal(b["sdf"], c["sdf"])  # seeded on the device
+    ref = make_batch(dataclasses.replace(cfg, gt_backend="torch"), body, volsmpl.Partition(body), 0)  # CPU
+    assert b["sdf"].shape == ref["sdf"].shape
+
+
+@pytest.mark.cuda
+def test_five_training_steps_on_cuda_with_the_torch_ground_truth(tmp_path):
+    res = train(tiny_cfg(gt_backend="torch"), tmp_path / "c", max_steps=5, device="cuda", quiet=True)
+    assert res["step"] == 5 and all(math.isfinite(x) for x in res["losses"])
+    rows = [json.loads(x) for x in (tmp_path / "c" / "profile.jsonl").read_text().splitlines()]
+    assert len(rows) == 5 and all(r["device"].startswith("cuda") for r in rows)
