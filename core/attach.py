@@ -28,7 +28,7 @@ def _check_body(body) -> None:
 
 
 def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool = True, model: str = "volsmpl",
-                  config=None, dense: bool = False):
+                  config=None, dense: bool = False, trainable: bool | None = None):
     """Attach a volumetric model as `body.volume` (and return it).
 
     Args:
@@ -40,6 +40,10 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
             (occupancy baseline, COAP) or 'mesh' (exact signed distance to the posed mesh, no weights).
         config: architecture for pretrained=False (VolumeConfig / CoapConfig; checkpoints carry their own).
         dense: use the dense reference query path (every part decoder on every point).
+        trainable: whether the network's weights require gradients. Default: False for pretrained weights (queries
+            then build no graph for 3.6 M weights; gradients still reach poses, shapes and points), True for random
+            weights (the start of training). Unfreeze a pretrained volume for fine-tuning with trainable=True or
+            `body.volume.requires_grad_(True)`.
     Example:
         >>> body = volsmpl.create_body()
         >>> volume = attach_volume(body, model="mesh")
@@ -80,6 +84,7 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
     volume = Volume(net, partition, fp, dense=dense).to(body.v_template.device)
     volume.meta = meta
     volume.eval()
+    volume.requires_grad_(not pretrained if trainable is None else bool(trainable))
     # plain attribute, not a submodule: body.to(...) does not move the volume (use body.volume.to(...))
     object.__setattr__(body, "volume", volume)
     return volume
