@@ -43,7 +43,7 @@ from volsmpl.scene import ROOM_COUNT, cached, intrinsics_from_fov, look_at, subs
 from .placement import (ACTIVITIES, affords, crop, default_body, load_room, place, room_cloud)
 
 __all__ = ["EgoFrame", "ACTIVITIES", "SPLITS", "make_frames", "scene_points", "scene_mesh", "frame_to_dict",
-           "frame_from_dict", "check_frame", "split_rooms", "to_camera"]
+           "frame_from_dict", "check_frame", "split_rooms", "to_camera", "make_group"]
 
 DATA_VERSION = 1
 SPLITS = ("train", "val", "test")
@@ -170,8 +170,11 @@ def _view(room, verts_w, joints_w, rng):
     return None
 
 
-def _group(split: str, g: int, seed: int) -> dict:
-    """The VIEWS frames of placement group g of a split, as arrays (deterministic in split, g, seed)."""
+def make_group(split: str, g: int, seed: int = 0) -> dict:
+    """The VIEWS frames of placement group g of a split, as arrays (deterministic in split, g, seed; not cached):
+    per view 'global_orient', 'transl', 'joints', 'keypoints', 'conf', 'visible', 'K', 'R', 't' (leading axis VIEWS);
+    once 'room_seed', 'activity', 'betas', 'body_pose', the world-frame 'global_orient_world', 'transl_world' and
+    'contact' (m, the support parts to their support)."""
     rooms = split_rooms(split, seed)
     per = GROUPS_PER_ROOM[split]
     room_seed = rooms[(g // per) % len(rooms)]
@@ -202,7 +205,8 @@ def _group(split: str, g: int, seed: int) -> dict:
         for key in ("global_orient", "transl", "joints", "K", "R", "t"):
             arrays[key] = arrays[key].astype(np.float32 if key in ("global_orient", "transl", "joints") else np.float64)
         arrays.update(room_seed=np.int64(room_seed), activity=np.array(activity), betas=pl.betas,
-                      body_pose=pl.body_pose, contact=np.float64(pl.contact))
+                      body_pose=pl.body_pose, contact=np.float64(pl.contact),
+                      global_orient_world=pl.global_orient, transl_world=pl.transl)
         return arrays
     raise RuntimeError(f"no placement in room {room_seed} for group {g} of split {split!r} (seed {seed})")
 
@@ -223,7 +227,7 @@ def make_frames(split: str, n: int | None = None, seed: int = 0) -> list[EgoFram
         raise ValueError(f"seed must be a non-negative int, got {seed!r}.")
     frames = []
     for g in range(-(-int(n) // VIEWS)):
-        d = cached(f"egohmr_{split}", DATA_VERSION, f"{int(seed)}-g{g:05d}", lambda: _group(split, g, int(seed)))
+        d = cached(f"egohmr_{split}", DATA_VERSION, f"{int(seed)}-g{g:05d}", lambda: make_group(split, g, int(seed)))
         for v in range(VIEWS):
             i = g * VIEWS + v
             if i >= n:
