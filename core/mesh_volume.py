@@ -26,6 +26,10 @@ from .volume_api import BodyVolume, check_output
 
 
 
+#: largest coordinate (metres) the exact kind answers: open3d's squared distances overflow float32 above ~1e19 m
+MAX_COORDINATE = 1e18
+
+
 class MeshVolume(BodyVolume):
     """The exact mesh reference (module docstring). backend: nearest-triangle search, see
     volsmpl.mesh_distance.nearest_faces ('auto': open3d's BVH when it imports, else torch brute force)."""
@@ -52,6 +56,11 @@ class MeshVolume(BodyVolume):
     def _check(self, out, points):
         check_output(out)
         points = check_points(points, out.vertices)
+        far = points.detach().abs().amax() if points.numel() else 0.0
+        if far > MAX_COORDINATE:
+            raise ValueError(f"points lie up to {float(far):.3g} m from the origin; the exact mesh distance is computed "
+                             f"only within {MAX_COORDINATE:.0e} m (its squared distances overflow beyond): drop or "
+                             f"rescale those points (the learned kinds answer up to float32's range).")
         if out.vertices.device != self.device:
             raise ValueError(f"the body output is on {out.vertices.device} but the volume is on {self.device}; "
                              f"move it with body.volume.to('{out.vertices.device}').")

@@ -6,6 +6,8 @@ The loss terms these fields control are described in `volsmpl.train`'s module do
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 from dataclasses import dataclass, field
 
 from .body.poses import check_pose_mode
@@ -54,6 +56,7 @@ class TrainConfig:
     model: object = field(default_factory=VolumeConfig)  # VolumeConfig, or CoapConfig for model_kind 'coap'
 
     def __post_init__(self):
+        check_numbers(self)
         if self.gt_sign not in SIGN_MODES:
             raise ValueError(f"gt_sign must be one of {SIGN_MODES}, got {self.gt_sign!r}")
         if self.gt_backend not in GT_BACKENDS:
@@ -102,6 +105,43 @@ class TrainConfig:
             if key in d:
                 d[key] = tuple(d[key])
         return cls(**d)
+
+
+#: integer fields and their smallest value
+_INTS = {"steps": 1, "batch_size": 1, "micro_batch": 1, "n_uniform": 0, "n_surface": 0, "n_body_surface": 0,
+         "gt_rays": 1, "seed": 0, "ckpt_every": 1, "log_every": 1, "keep_ckpts": 1, "num_threads": 0,
+         "num_workers": 0, "anneal_start": 0}
+#: real fields: (smallest value, whether it must be above it rather than at least it)
+_REALS = {"lr": (0.0, True), "lr_final": (0.0, True), "sign_tau": (0.0, True), "sign_weight": (0.0, False),
+          "abs_weight": (0.0, False), "global_orient_scale": (0.0, False), "extreme_fraction": (0.0, False),
+          "ema_decay": (0.0, False)}
+
+
+def check_numbers(cfg: "TrainConfig") -> None:
+    """ValueError / TypeError in one line for a numeric field of the wrong type, NaN, inf or out of range."""
+    for name, least in _INTS.items():
+        v = getattr(cfg, name)
+        if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+            raise TypeError(f"training config: {name} must be an integer, got {type(v).__name__} {v!r}.")
+        if v < least:
+            raise ValueError(f"training config: {name}={v} must be >= {least}.")
+    for name, (least, strict) in _REALS.items():
+        v = getattr(cfg, name)
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise TypeError(f"training config: {name} must be a number, got {type(v).__name__} {v!r}.")
+        if not math.isfinite(v) or v < least or (strict and v == least):
+            raise ValueError(f"training config: {name}={v} must be a finite number {'>' if strict else '>='} {least}.")
+    if cfg.n_uniform + cfg.n_surface + cfg.n_body_surface == 0:
+        raise ValueError("training config: n_uniform, n_surface and n_body_surface are all 0: no query points to train on.")
+    if cfg.gt_rays % 2 == 0:
+        raise ValueError(f"training config: gt_rays={cfg.gt_rays} must be odd (a majority vote of rays).")
+    for name in ("surface_sigma", "body_surface_sigma"):
+        v = getattr(cfg, name)
+        ok = isinstance(v, (tuple, list)) and len(v) == 2 and all(
+            isinstance(x, numbers.Real) and not isinstance(x, bool) and math.isfinite(x) and x > 0 for x in v)
+        if not ok or v[0] > v[1]:
+            raise ValueError(f"training config: {name}={v!r} must be two finite positive numbers (metres), "
+                             f"smallest first, e.g. (0.01, 0.05).")
 
 
 def lr_at(cfg: TrainConfig, step: int) -> float:

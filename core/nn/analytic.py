@@ -27,10 +27,13 @@ def box_sdf(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor)
     center = 0.5 * (box_min + box_max)
     half = 0.5 * (box_max - box_min)
     q = (x_local - center).abs() - half                                # (..., 3)
-    sq = q.clamp(min=0.0).square().sum(-1)
-    # sqrt has an infinite derivative at 0: evaluate it only where the point is strictly outside.
-    pos = sq > 0
-    outside = torch.where(pos, torch.sqrt(torch.where(pos, sq, torch.ones_like(sq))), torch.zeros_like(sq))
+    qp = q.clamp(min=0.0)
+    # the norm by hypot, which does not overflow (squares do above 1.8e19 m: inf for distances float32 holds);
+    # its derivative is 0/0 at 0: evaluate it only where the point is strictly outside.
+    pos = qp.amax(dim=-1) > 0
+    qs = torch.where(pos[..., None], qp, torch.ones_like(qp))
+    norm = torch.hypot(torch.hypot(qs[..., 0], qs[..., 1]), qs[..., 2])
+    outside = torch.where(pos, norm, torch.zeros_like(norm))
     inside = q.amax(dim=-1).clamp(max=0.0)
     return outside + inside
 
