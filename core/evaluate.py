@@ -201,15 +201,17 @@ def _is_validation_set(bodies, cfg: EvalConfig) -> bool:
 
 
 def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str = "VolumetricSMPL (ours)",
-                    resource_spec: Optional[dict] = None, **overrides) -> EvalResult:
+                    resource_spec: Optional[dict] = None, bodies: Optional[Dict[str, torch.Tensor]] = None,
+                    **overrides) -> EvalResult:
     """`evaluate` of `volume.query` (volume attached to `body`); with config.timing also `measure_resources`,
     which needs `resource_spec` (how the subprocess rebuilds the volume: see measure_resources)."""
     cfg = dataclasses.replace(config or EvalConfig(), **overrides)
     volume = volume.to(torch.device(cfg.device))
     if volume.is_sdf:
-        res = evaluate(lambda out, pts: volume.query(out, pts), body=body, config=cfg, name=name)
+        res = evaluate(lambda out, pts: volume.query(out, pts), bodies=bodies, body=body, config=cfg, name=name)
     else:  # occupancy (COAP): level - occupancy is negative inside, so the IoU columns are exact
-        res = evaluate(lambda out, pts: volume.level - volume.query(out, pts), body=body, config=cfg, name=name)
+        res = evaluate(lambda out, pts: volume.level - volume.query(out, pts), bodies=bodies, body=body, config=cfg,
+                       name=name)
         for k in [k for k in res.metrics if k.startswith("mse")]:  # not distances: no SDF error to report
             res.metrics[k] = None
             res.per_body[k] = [None] * len(res.per_body[k])
@@ -223,7 +225,8 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
 
 
 def evaluate_checkpoint(path: str | os.PathLike | None, config: Optional[EvalConfig] = None, body=None,
-                        random_init: Optional[dict] = None, **overrides) -> EvalResult:
+                        random_init: Optional[dict] = None, bodies: Optional[Dict[str, torch.Tensor]] = None,
+                        **overrides) -> EvalResult:
     """Evaluate a checkpoint (None: the shipped VolumetricSMPL one) with the default body (or `body`).
     The checkpoint says which model it holds (VolumetricSMPL or COAP); occupancy models get IoU only.
 
@@ -247,7 +250,7 @@ def evaluate_checkpoint(path: str | os.PathLike | None, config: Optional[EvalCon
         spec = {"checkpoint": None if path is None else os.fspath(path), "model": kind}
         name = "ours" if path is None else Path(os.fspath(path)).name
     spec["body_model"] = getattr(body, "model_path", None)
-    res = evaluate_volume(vol, body, config=config, name=name, resource_spec=spec, **overrides)
+    res = evaluate_volume(vol, body, config=config, name=name, resource_spec=spec, bodies=bodies, **overrides)
     res.extra["checkpoint"] = spec.get("checkpoint")
     return res
 
@@ -387,6 +390,10 @@ def add_parser(sub):
     p.add_argument("--cache-dir", default=None, help=f"ground-truth cache (default {default_cache_dir()})")
     p.add_argument("--no-cache", action="store_true", help="recompute the ground truth, do not write the cache")
     p.add_argument("--out", default=None, help="write the results as JSON here")
+    p.add_argument("--split", default="all", choices=["standard", "self_contact", "all"],
+                   help="validation split: the standard set, the self-contact poses (volsmpl.contact_split: min(n-bodies, "
+                        "16) bodies, same points and metrics; no timing) or both (default; JSON: the standard result "
+                        "with the self-contact one under 'splits')")
     return p
 
 
@@ -403,7 +410,11 @@ def run(args) -> int:
     cfg = EvalConfig(n_bodies=args.n_bodies, n_points=args.points, seed=args.seed, batch_size=args.batch_size,
                      device=args.device, timing=args.timing, timing_repeats=args.repeats, cache_dir=args.cache_dir,
                      use_cache=not args.no_cache, timing_threads=args.threads, gt_sign=args.gt_sign)
-    res = evaluate_checkpoint(args.checkpoint, config=cfg, random_init={"config": {}, "init_seed": 0} if args.random_init else None)
+    init = {"config": {}, "init_seed": 0} if args.random_init else None
+    if args.split == "self_contact":
+        from .contact_split import evaluate_self_contact
+        return _write_split(args, evaluate_self_contact(args.checkpoint, cfg, init))
+    res = evaluate_checkpoint(args.checkpoint, config=cfg, random_init=init)
     print(f"validation set: {cfg.n_bodies} bodies (seed {cfg.seed}, digest {res.validation_digest[:12]}), "
           f"{cfg.n_points} points each; ground truth {res.seconds['ground_truth']:.1f} s, "
           f"model {res.seconds['predict']:.1f} s")
@@ -412,7 +423,23 @@ def run(args) -> int:
         print(f"time: batch 1 x {res.resources['points']} points on {res.resources['device']} "
               f"({res.resources['threads']} threads), median of {cfg.timing_repeats}; t = encoding + query, "
               f"t query = query only; mem = {res.resources['mem_kind']}")
+    if args.split == "all":
+        from .contact_split import evaluate_self_contact
+        return _write_split(args, res, evaluate_self_contact(args.checkpoint, cfg, init))
+    return _write_split(args, res)
+
+
+def _write_split(args, res: EvalResult, contact: Optional[EvalResult] = None) -> int:
+    """Print the self-contact table (when `contact`, or when `res` is it) and write --out: `res` with `contact`
+    under 'splits'."""
+    from .outputs import write_atomic
+    for r in [x for x in (res, contact) if x is not None and x.extra.get("split") == "self_contact"]:
+        print(f"self-contact split: {r.config['n_bodies']} bodies ({', '.join(sorted(set(r.per_body['label'])))[:80]}...)")
+        print(format_table(r))
     if args.out:
-        write_atomic(args.out, json.dumps(res.to_dict(), indent=1))
+        d = res.to_dict()
+        if contact is not None:
+            d["splits"] = {"self_contact": contact.to_dict()}
+        write_atomic(args.out, json.dumps(d, indent=1))
         print(f"wrote {args.out}")
     return 0

@@ -309,3 +309,59 @@ def test_shipped_coap_checkpoint_accuracy(tmp_path):
     res = ev.evaluate_checkpoint(model_kind("coap").default_checkpoint, n_bodies=4, n_points=8000, cache_dir=str(tmp_path))
     assert res.metrics["iou_mean"] > 0.55, res.metrics
     assert res.metrics["mse_sdf"] is None
+
+
+# ---------------------------------------------------------------------------------------------- self-contact split
+def test_self_contact_split_seeded_within_limits_and_labelled():
+    from volsmpl.body.poses import within_limits
+    from volsmpl.contact_split import N_CONTACT_BODIES, SELF_CONTACT_POSES, self_contact_bodies, self_contact_labels
+    a, b = self_contact_bodies(N_CONTACT_BODIES), self_contact_bodies(N_CONTACT_BODIES)
+    assert val.digest(a) == val.digest(b)
+    assert val.digest(self_contact_bodies(3)) == val.digest({k: v[:3] for k, v in a.items()})  # prefix
+    assert bool(within_limits(a["body_pose"]).all())
+    P = len(SELF_CONTACT_POSES)
+    d = (a["body_pose"][:P] - a["body_pose"][P:]).abs().amax(dim=1)
+    assert ((d > 0) & (d < 0.3)).all()  # the second copy of every pose is a small jitter of the first
+    labels = self_contact_labels(N_CONTACT_BODIES)
+    assert labels[0] == "contact:arms_crossed/tall" and labels[P] .startswith("contact:arms_crossed~/")
+    assert {x.split(":")[1].split("/")[0].rstrip("~") for x in labels} == set(SELF_CONTACT_POSES)
+    assert {x.split("/")[1] for x in labels[:P]} == set(val.SHAPE_GROUPS)
+
+
+def test_self_contact_poses_touch(body):
+    """Every exact pose brings parts that are not neighbours in the kinematic tree within 1 cm of each other (or
+    through each other), except sitting on the heels (calf on thigh: neighbours) and hands on hips (close only)."""
+    from scipy.spatial import cKDTree
+    from volsmpl.contact_split import SELF_CONTACT_POSES, self_contact_bodies
+    P = len(SELF_CONTACT_POSES)
+    part = volsmpl.Partition(body)
+    lab, parents = part.vertex_labels.numpy(), part.table.part_parents
+    bodies = self_contact_bodies(P)
+    with torch.no_grad():
+        verts = body(betas=bodies["betas"], body_pose=bodies["body_pose"]).vertices.numpy()
+    for name, v in zip(SELF_CONTACT_POSES, verts):
+        pairs = cKDTree(v).query_pairs(0.01, output_type="ndarray")
+        a, b = lab[pairs[:, 0]], lab[pairs[:, 1]]
+        far = (a != b) & (np.asarray(parents)[a] != b) & (np.asarray(parents)[b] != a)
+        if name not in ("sitting_on_heels", "hands_on_hips"):
+            assert far.sum() > 0, name
+
+
+def test_cli_split_all_keeps_the_standard_numbers(body, tiny_config, tmp_path, capsys):
+    from volsmpl.cli import main
+    torch.manual_seed(2)
+    vol = volsmpl.attach_volume(body, pretrained=False, config=tiny_config)
+    path = tmp_path / "tiny"
+    save_checkpoint(path, vol.net.state_dict(), vol.net.config.to_dict(), {"body_fingerprint": vol.fingerprint})
+    common = ["eval", "--checkpoint", str(path), "--n-bodies", "2", "--points", "1000", "--cache-dir", str(tmp_path / "c"),
+              "--threads", "1"]
+    assert main(common + ["--split", "standard", "--out", str(tmp_path / "s.json")]) == 0
+    assert main(common + ["--split", "all", "--out", str(tmp_path / "a.json")]) == 0
+    assert main(common + ["--split", "self_contact", "--out", str(tmp_path / "c.json")]) == 0
+    assert "self-contact split" in capsys.readouterr().out
+    s, a, c = (json.loads((tmp_path / f"{x}.json").read_text()) for x in "sac")
+    assert a["metrics"] == s["metrics"] and a["validation_digest"] == s["validation_digest"] and "splits" not in s
+    sc = a["splits"]["self_contact"]
+    assert sc["metrics"] == c["metrics"] and sc["extra"]["split"] == "self_contact" and sc["config"]["n_bodies"] == 2
+    assert sc["per_body"]["label"][0].startswith("contact:") and sc["validation_digest"] != s["validation_digest"]
+    assert len(list((tmp_path / "c").glob("gt_*.npz"))) == 2  # each split's ground truth cached once
