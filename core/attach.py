@@ -56,7 +56,7 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
         if checkpoint is not None or config is not None:
             raise ValueError(f"model '{model}' has no weights: pass neither checkpoint nor config")
         volume = MeshVolume(Partition(body), fp).to(body.v_template.device)
-        object.__setattr__(body, "volume", volume)
+        _attach(body, volume)
         return volume
     from .volume import Volume
 
@@ -85,6 +85,23 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
     volume.meta = meta
     volume.eval()
     volume.requires_grad_(not pretrained if trainable is None else bool(trainable))
-    # plain attribute, not a submodule: body.to(...) does not move the volume (use body.volume.to(...))
-    object.__setattr__(body, "volume", volume)
+    _attach(body, volume)
     return volume
+
+
+def _apply_with_volume(body, fn, *args, **kwargs):
+    """Module._apply of a body that also applies fn to its attached volume (body.to / .cuda / .double move both)."""
+    result = type(body)._apply(body, fn, *args, **kwargs)
+    volume = body.__dict__.get("volume")
+    if volume is not None:
+        volume._apply(fn, *args, **kwargs)
+    return result
+
+
+def _attach(body, volume) -> None:
+    """Set body.volume as a plain attribute (not a submodule: the body's parameters and state dict stay those of the
+    body) that moves with the body: body.to(device or dtype), .cuda(), .double() also move the volume."""
+    import types
+
+    object.__setattr__(body, "volume", volume)
+    object.__setattr__(body, "_apply", types.MethodType(_apply_with_volume, body))

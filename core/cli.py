@@ -67,6 +67,9 @@ def main(argv=None) -> int:
     name = command if command in SUBCOMMANDS else "?"
     try:
         args = build_parser(command if command in SUBCOMMANDS else "").parse_args(argv)
+        if getattr(args, "device", None) is not None:  # every --device: runs there, or one line why not
+            from .devices import check_device
+            check_device(args.device)
         return int(args._run(args) or 0)
     except SystemExit:  # argparse (usage line + error, exit 2; --help exit 0) and explicit exits
         raise
