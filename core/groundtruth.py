@@ -434,7 +434,8 @@ def batch_sdf(vertices, faces, points, sign: str = "ray_winding", nsamples: int 
     Shape: vertices (B, V, 3), faces (F, 3), points (B, N, 3) -> (B, N), torch on the points' device and dtype
     for torch points (numpy otherwise).
     backend: 'open3d' (`batch_mesh_sdf` on the CPU), 'torch' (`MeshQuery` on the vertices' device, at most `chunk`
-    point-triangle pairs at once: DEFAULT_CHUNK ~0.6 GB when None) or 'auto' (`resolve_gt_backend`).
+    point-triangle pairs at once; None: `mesh_query.DEFAULT_CHUNK` (2^20, <= 0.6 GB) on the CPU, 8x that on a GPU,
+    where fewer, larger blocks keep it busy) or 'auto' (`resolve_gt_backend`).
     The torch backend counts crossings of one ray with exact tie-breaking, so every sign mode needs no vote:
     'raycast' is the parity of the crossings, the other modes the winding number (> 0 inside: self-overlaps
     inside); it needs a closed, consistently oriented mesh (checked when check_closed).
@@ -457,7 +458,7 @@ def batch_sdf(vertices, faces, points, sign: str = "ray_winding", nsamples: int 
     for i in range(len(vt)):
         if pt.shape[1] == 0:
             break
-        mq = MeshQuery(vt[i], ft, chunk=DEFAULT_CHUNK if chunk is None else chunk)
+        mq = MeshQuery(vt[i], ft, chunk=(DEFAULT_CHUNK * (1 if dev.type == "cpu" else 8)) if chunk is None else chunk)
         p = pt[i].to(dev)
         signed, total = mq.crossings(p)
         inside = (total % 2 == 1) if sign == "raycast" else signed > 0
