@@ -7,7 +7,7 @@ TORCH_SPEC ?= torch==2.13.0
 STAMP := $(VENV)/.volsmpl-installed
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: install demo test report clean
+.PHONY: install demo test mutants report clean
 
 install: $(STAMP)
 
@@ -27,6 +27,10 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q -ra --durations=8
+
+# named deliberate bugs (tools/mutants.py), each applied to a copy of the package: every one must fail a test
+mutants: $(STAMP)
+	$(PY) tools/mutants.py
 
 report: $(STAMP)
 	$(VENV)/bin/volsmpl report

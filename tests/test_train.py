@@ -216,7 +216,7 @@ def test_time_budget_is_cumulative_over_resumes(tmp_path):
 def test_ddp_two_processes_gloo(tmp_path):
     cfgf = tmp_path / "cfg.json"
     cfgf.write_text(json.dumps(tiny_cfg().to_dict()))
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2", "--master_port=29533", "-m", "volsmpl.cli",
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2", "--standalone", "-m", "volsmpl.cli",  # --standalone: a free port
            "train", "--config", str(cfgf), "--out", str(tmp_path / "ddp"), "--max-steps", "2"]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)

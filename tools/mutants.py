@@ -1,0 +1,124 @@
+"""`make mutants`: named, deliberate bugs, each of which must make at least one test fail.
+
+Each mutant is one exact text substitution in one file of the package. It is applied to a COPY of the package
+(core/ as volsmpl, apps/ as volsmpl.apps, assets linked) in a temporary folder, and the tests named for it run
+against that copy (PYTHONPATH puts it before the installed work tree). The work tree is never edited. The
+unmutated copy must pass the same tests first (else a "killed" mutant would prove nothing).
+
+    python tools/mutants.py              # every mutant
+    python tools/mutants.py NAME ...     # some; --list names them
+Exit status 0 when every mutant is killed, 1 when one survives (or the baseline fails).
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+T = "tests/"
+
+#: name -> (file in the repository, text, its replacement, tests that must catch it)
+MUTANTS = {
+    # the planted bugs of issue 27
+    "pointnet_per_point_copy": ("core/nn/pointnet.py", "pooled = net.amax(dim=1, keepdim=True).expand_as(net)",
+                                "pooled = net", [T + "test_references.py::test_pointnet_against_plain_reference"]),
+    "boxes_padded_one_side": ("core/partition.py", "return center - half, center + half",
+                              "return lo - 2 * (half - 0.5 * (hi - lo)), hi",
+                              [T + "test_references.py::test_padded_boxes_are_the_tight_boxes_grown_about_their_centre"]),
+    "eval_sigma_x1.3": ("core/evaluate.py", "cfg.bbox_padding, cfg.surface_sigma)", "cfg.bbox_padding, cfg.surface_sigma * 1.3)",
+                        [T + "test_references.py::test_evaluation_near_surface_spread"]),
+    "collision_sum_is_mean": ("core/collision.py", "return pen.sum(dim=1)", "return pen.mean(dim=1)",
+                              [T + "test_references.py::test_collision_loss_reductions_against_relu_of_query"]),
+    "query_min_over_all_parts": ("core/volume.py",
+                                 'implicit = torch.where(inside, part, torch.full_like(part, float("inf"))).amin(dim=1)',
+                                 "implicit = part.amin(dim=1)", [T + "test_references.py::test_query_is_min_over_the_parts_whose_box_holds_the_point"]),
+    "selfpen_sign_flipped": ("core/self_penetration.py", "torch.sigmoid(-part / tau)", "torch.sigmoid(part / tau)",
+                             [T + "test_references.py::test_selfpen_penalty_by_hand"]),
+    # the bugs fixed for issue 27, put back
+    "cache_ignores_output_content": ("core/volume.py", "cached[0] is self and cached[1].key == key:", "cached[0] is self:",
+                                     [T + "test_encoding_cache.py"]),
+    "cache_weights_by_version": ("core/tensor_fingerprint.py", "return fingerprint([*module.parameters(), *module.buffers()])",
+                                 "return tuple((t.data_ptr(), t._version) for t in (*module.parameters(), *module.buffers()))",
+                                 [T + "test_encoding_cache.py"]),
+    "checkpoint_weights_unverified": ("core/checkpoint.py", 'if digests is not None and weights_digest(state_dict) != digests["weights"]:',
+                                      "if False:", [T + "test_checkpoint.py"]),
+    "checkpoint_config_unverified": ("core/checkpoint.py", 'elif digests["config"] != config_digest(config):', "elif False:",
+                                     [T + "test_checkpoint.py"]),
+    "checkpoint_nan_accepted": ("core/checkpoint.py", "bad = _non_finite(state_dict)", "bad = None", [T + "test_checkpoint.py"]),
+    "pretrained_not_frozen": ("core/attach.py", "volume.requires_grad_(not pretrained if trainable is None else bool(trainable))",
+                              "volume.requires_grad_(True)", [T + "test_frozen_volume.py"]),
+    "train_config_unchecked": ("core/train_config.py", "        check_numbers(self)\n", "", [T + "test_limits.py"]),
+    "box_sdf_squares_overflow": ("core/nn/analytic.py", "norm = torch.hypot(torch.hypot(qs[..., 0], qs[..., 1]), qs[..., 2])",
+                                 "norm = qs.square().sum(-1).sqrt()", [T + "test_limits.py"]),
+    "device_unchecked": ("core/cli.py", "            check_device(args.device)\n", "", [T + "test_cuda_paths.py::test_device_cuda_without_cuda_is_one_line",
+                                                                                   T + "test_cuda_paths.py::test_check_device_names"]),
+    "volume_stays_behind": ("core/attach.py", 'object.__setattr__(body, "_apply", types.MethodType(_apply_with_volume, body))',
+                            "pass", [T + "test_cuda_paths.py::test_volume_moves_with_its_body"]),
+}
+
+
+def package_copy(root: Path) -> Path:
+    """core/ -> root/volsmpl, apps/ -> root/volsmpl/apps (caches left out, assets linked); returns root."""
+    skip = shutil.ignore_patterns("__pycache__", "*.pyc", "assets")
+    shutil.copytree(REPO / "core", root / "volsmpl", ignore=skip)
+    os.symlink(REPO / "core" / "assets", root / "volsmpl" / "assets")
+    shutil.copytree(REPO / "apps", root / "volsmpl" / "apps", ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    return root
+
+
+def target(root: Path, path: str) -> Path:
+    rel = Path(path)
+    return root / "volsmpl" / (rel.relative_to("core") if rel.parts[0] == "core" else Path("apps") / rel.relative_to("apps"))
+
+
+def run_tests(root: Path, tests: list[str]) -> int:
+    env = {**os.environ, "PYTHONPATH": str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+           "OMP_NUM_THREADS": "1", "PYTHONDONTWRITEBYTECODE": "1"}
+    cmd = [sys.executable, "-m", "pytest", "-q", "-x", "-p", "no:cacheprovider", *tests]
+    return subprocess.run(cmd, cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL).returncode
+
+
+def main(argv: list[str]) -> int:
+    if "--list" in argv:
+        print("\n".join(MUTANTS))
+        return 0
+    names = argv or list(MUTANTS)
+    unknown = [n for n in names if n not in MUTANTS]
+    if unknown:
+        print(f"unknown mutant(s) {unknown}; `python tools/mutants.py --list` names them", file=sys.stderr)
+        return 2
+    with tempfile.TemporaryDirectory(prefix="volsmpl-mutants-") as tmp:
+        root = package_copy(Path(tmp))
+        for name in names:  # every substitution must still match the code
+            path, old, _, _ = MUTANTS[name]
+            if target(root, path).read_text().count(old) != 1:
+                print(f"{name}: the text to mutate is not found exactly once in {path}; update tools/mutants.py", file=sys.stderr)
+                return 1
+        tests = sorted({t for n in names for t in MUTANTS[n][3]})
+        if run_tests(root, tests) != 0:
+            print(f"baseline: the unmutated copy fails {tests}; fix that first", file=sys.stderr)
+            return 1
+        survived = []
+        for name in names:
+            path, old, new, tests = MUTANTS[name]
+            f = target(root, path)
+            original = f.read_text()
+            f.write_text(original.replace(old, new))
+            try:
+                rc = run_tests(root, tests)
+            finally:
+                f.write_text(original)
+            killed = rc not in (0, 4, 5)  # 4: usage error, 5: no tests collected
+            print(f"{'killed  ' if killed else 'SURVIVED'} {name} (pytest exit {rc})", flush=True)
+            if not killed:
+                survived.append(name)
+    print(f"{len(names) - len(survived)} of {len(names)} mutants killed" + (f"; survived: {', '.join(survived)}" if survived else ""))
+    return 1 if survived else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
