@@ -434,7 +434,8 @@ def _write_split(args, res: EvalResult, contact: Optional[EvalResult] = None) ->
     under 'splits'."""
     from .outputs import write_atomic
     for r in [x for x in (res, contact) if x is not None and x.extra.get("split") == "self_contact"]:
-        print(f"self-contact split: {r.config['n_bodies']} bodies ({', '.join(sorted(set(r.per_body['label'])))[:80]}...)")
+        poses = dict.fromkeys(x.split(":")[-1].split("/")[0].rstrip("~") for x in r.per_body["label"])
+        print(f"self-contact split: {r.config['n_bodies']} bodies (seed {r.config['seed']}; {', '.join(poses)})")
         print(format_table(r))
     if args.out:
         d = res.to_dict()
