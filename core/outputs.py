@@ -3,6 +3,7 @@
     check_writable(args.out, kind="dir", option="--out")   # at the start of run(args): fails in one clear line
     ...                                                    # the (long) job
     write_atomic(Path(args.out) / "results.json", text)    # a temp file + os.replace: never a half-written file
+    with exclusive_folder(out_dir, "volsmpl train"): ...   # a second writer of the folder stops in one line
 
 check_writable creates the missing parent folders (and, for kind='dir', the folder itself) and proves the
 place writable by creating and removing a temporary file there, so a read-only folder, a path through a
@@ -11,11 +12,12 @@ Its errors are ValueError (the CLI prints them as one line, exit 2).
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["check_writable", "write_atomic"]
+__all__ = ["check_writable", "exclusive_folder", "write_atomic"]
 
 
 def _probe(folder: Path) -> None:
@@ -89,3 +91,30 @@ def write_atomic(path, data) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+@contextlib.contextmanager
+def exclusive_folder(folder, who: str):
+    """Hold an exclusive lock on `folder` (created if missing) for the block: a second process asking for it gets
+    a RuntimeError in one line naming the holder's pid. The lock (flock on folder/.lock) is released when the block
+    ends and by the system when the holder dies, even by SIGKILL, so a killed run never leaves a stale lock."""
+    import fcntl
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    fh = open(folder / ".lock", "a+")
+    try:
+        try:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            holder = fh.read().strip() or "?"
+            raise RuntimeError(f"{folder} is being written by another {who} (pid {holder}); wait for it to end or "
+                               f"choose another output folder.") from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(str(os.getpid()))
+        fh.flush()
+        yield folder
+    finally:
+        fh.close()  # closing releases the lock

@@ -49,6 +49,7 @@ This module holds the losses, the step, checkpointing/resume, the loop and the C
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import csv
 import json
@@ -67,6 +68,7 @@ from .attach import attach_volume
 from .body.model import create_body
 from .checkpoint import load_checkpoint, save_checkpoint
 from .models import model_kind
+from .outputs import exclusive_folder, write_atomic
 from .train_batches import StepProfile, batch_stream, write_profile
 from .train_config import TrainConfig, lr_at
 
@@ -244,13 +246,19 @@ def _dist_info():
 
 
 def _truncate_log(path: Path, step: int) -> None:
-    """Drop log rows after `step` (the step a resumed run restarts from), atomically."""
+    """Drop log rows after `step` (the step a resumed run restarts from), and a row cut short by a killed run,
+    atomically."""
     lines = path.read_text().splitlines(keepends=True)
-    keep = lines[:1] + [ln for ln in lines[1:] if ln.split(",", 1)[0].isdigit() and int(ln.split(",", 1)[0]) <= step]
+    n = len(LOG_HEADER)
+    keep = lines[:1] + [ln for ln in lines[1:] if ln.endswith("\n") and len(ln.split(",")) == n
+                        and ln.split(",", 1)[0].isdigit() and int(ln.split(",", 1)[0]) <= step]
     if len(keep) != len(lines):
         tmp = path.with_suffix(".csv.tmp")
         tmp.write_text("".join(keep))
         os.replace(tmp, path)
+
+
+LOG_HEADER = ["step", "loss", "sign", "abs", "lr", "sec_per_step", "data_sec"]
 
 
 def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps: int | None = None,
@@ -265,10 +273,24 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     a model checkpoint (e.g. a shipped one): its weights and its training step,
     so the learning-rate schedule and the data stream continue; Adam's moments start afresh.
 
+    One process (rank 0) writes out_dir at a time (a second one stops with a RuntimeError naming the first), and a
+    run killed at any moment, even during a checkpoint write, resumes from its last complete checkpoint.
+
     Returns a summary dict: last step, last loss, steps/s.
     """
     out_dir = Path(out_dir)
     rank, world = _dist_info()
+    with exclusive_folder(out_dir, "volsmpl train") if rank == 0 else contextlib.nullcontext():
+        if rank == 0:  # what a killed run left half-written: never published, so never read
+            for tmp in out_dir.glob(".tmp-ckpt-*"):
+                shutil.rmtree(tmp, ignore_errors=True)
+            (out_dir / ".latest.tmp").unlink(missing_ok=True)
+        return _train(cfg, out_dir, rank, world, resume, max_steps, device, quiet, init, max_seconds)
+
+
+def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool, max_steps: int | None, device: str,
+           quiet: bool, init, max_seconds: float | None) -> dict:
+    """The body of `train`, with out_dir locked."""
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     torch.manual_seed(cfg.seed)
@@ -322,7 +344,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     model = torch.nn.parallel.DistributedDataParallel(step_mod) if world > 1 else step_mod
     if rank == 0:
         out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=1))
+        write_atomic(out_dir / "config.json", json.dumps(cfg.to_dict(), indent=1))
     log_path = out_dir / "log.csv"
     if rank == 0 and log_path.exists():
         _truncate_log(log_path, start)  # rows past the checkpoint were logged by a run that stopped before saving
@@ -330,7 +352,7 @@ def train(cfg: TrainConfig, out_dir: str | Path, resume: bool = False, max_steps
     logf = open(log_path, "a", newline="") if rank == 0 else None
     writer = csv.writer(logf) if logf else None
     if new_log:
-        writer.writerow(["step", "loss", "sign", "abs", "lr", "sec_per_step", "data_sec"])
+        writer.writerow(LOG_HEADER)
     t0, losses, last = time.time(), [], {}
     step_profile = StepProfile()
     for step in range(start, end):

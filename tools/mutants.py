@@ -58,6 +58,11 @@ MUTANTS = {
                                                                                    T + "test_cuda_paths.py::test_check_device_names"]),
     "volume_stays_behind": ("core/attach.py", 'object.__setattr__(body, "_apply", types.MethodType(_apply_with_volume, body))',
                             "pass", [T + "test_cuda_paths.py::test_volume_moves_with_its_body"]),
+    "run_folder_unlocked": ("core/train.py", 'with exclusive_folder(out_dir, "volsmpl train") if rank == 0 else contextlib.nullcontext():',
+                            "with contextlib.nullcontext():", [T + "test_train_faults.py::test_second_writer_of_a_run_folder_is_refused"]),
+    "run_config_written_in_place": ("core/train.py", 'write_atomic(out_dir / "config.json", json.dumps(cfg.to_dict(), indent=1))',
+                                    '(out_dir / "config.json").write_text(json.dumps(cfg.to_dict(), indent=1))',
+                                    [T + "test_train_faults.py::test_killed_while_writing_the_run_config_resumes"]),
 }
 
 
