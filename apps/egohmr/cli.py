@@ -2,7 +2,7 @@
 Table 4, supp. D.2).
 
     volsmpl egohmr make-data                                  # the generated frames (train / val / test), cached
-    volsmpl egohmr train --out runs/egohmr [--steps 6000] [--resume]
+    volsmpl egohmr train --out runs/egohmr [--steps 4000] [--resume]
     volsmpl egohmr tune --split val --out docs/egohmr/tune.json     # guidance scale per guide, on val
     volsmpl egohmr sample --guide none,volsmpl,coap,mesh --split test [--frames N] --out out/egohmr
 

@@ -6,9 +6,8 @@
 
 J is the kind's `collision_loss` per scene point (VolumetricSMPL and 'mesh': ReLU(-sdf); COAP: the occupancy
 where above 0.5, the paper's sigmoid(f) 1[f > 0]) averaged over the frame's N points, as the paper writes it for
-both models. Points farther than `margin` from the body's bounding box are left out of the evaluation (their
-penetration is exactly 0 for every kind: the analytic box SDF and COAP's zero outside the part boxes) while the
-mean still divides by N, so J is unchanged.
+both models. Points outside every padded part box are left out of the evaluation (their penetration is exactly 0
+for every kind) while the mean still divides by N, so J is unchanged.
 
 Options (the authors' released code departs from the paper; each is a flag, not the default):
 - `wrt`: 'denoised' (default: J of the denoiser's clean estimate, "given a denoised SMPL body", main text
@@ -22,6 +21,9 @@ from __future__ import annotations
 
 import torch
 
+from volsmpl.boxes import inside_boxes
+from volsmpl.partition import Partition
+
 from .pose import leg_mask, pose_body
 
 WRT = ("denoised", "noisy")
@@ -34,7 +36,7 @@ class CollisionScore:
     """J(x) of one batch of frames (module docstring). betas (B, 10), pelvis (B, 3) fixed; points (B, N, 3)."""
 
     def __init__(self, body, volume, betas: torch.Tensor, pelvis: torch.Tensor, points: torch.Tensor,
-                 wrt: str = "denoised", joints: str = "all", reduce: str = "mean", margin: float = 0.3):
+                 wrt: str = "denoised", joints: str = "all", reduce: str = "mean", margin: float = 0.5):
         for name, v, ok in (("wrt", wrt, WRT), ("joints", joints, JOINTS), ("reduce", reduce, REDUCE)):
             if v not in ok:
                 raise ValueError(f"guidance {name}={v!r}; choose one of {', '.join(ok)}")
@@ -46,22 +48,32 @@ class CollisionScore:
         self.wrt, self.joints, self.reduce, self.margin = wrt, joints, reduce, margin
         self.last = None
 
-    def _near(self, vertices: torch.Tensor) -> torch.Tensor:
-        """The points within `margin` of each body's bounding box, padded with far points. (B, M, 3)."""
-        P, V = self.points, vertices.detach()
+    @torch.no_grad()
+    def _near(self, out) -> torch.Tensor:
+        """Each frame's points inside one of its body's padded part boxes, padded with far points. (B, M, 3).
+        Points outside every box penetrate by exactly 0 for every kind (the analytic box SDF is positive there,
+        COAP's occupancy 0, and the mesh lies inside its parts' boxes), so leaving them out changes no value."""
+        part, P = self.volume.partition, self.points
+        V = out.vertices.detach()
         lo, hi = V.amin(1, keepdim=True) - self.margin, V.amax(1, keepdim=True) + self.margin
-        keep = ((P >= lo) & (P <= hi)).all(-1)  # (B, N)
-        m = max(int(keep.sum(1).max()), 1)
-        far = self.pelvis[:, None].to(P.dtype) + torch.tensor([0.0, -FAR, 0.0], dtype=P.dtype, device=P.device)
-        out = far.expand(len(P), m, 3).clone()
+        cand = ((P >= lo) & (P <= hi)).all(-1)  # (B, N): a cheap first cut
+        G = part.part_transforms(out.full_pose.detach(), out.joints.detach())
+        bmin, bmax = part.boxes(V, G)
+        kept = []
         for b in range(len(P)):
-            k = P[b][keep[b]]
-            out[b, : len(k)] = k
-        return out
+            c = P[b][cand[b]]
+            ins = inside_boxes(Partition.canonicalize(c[None], G[b:b + 1]), bmin[b:b + 1], bmax[b:b + 1])[0]
+            kept.append(c[ins.any(0)])
+        m = max(max(len(k) for k in kept), 1)
+        far = self.pelvis[:, None].to(P.dtype) + torch.tensor([0.0, -FAR, 0.0], dtype=P.dtype, device=P.device)
+        near = far.expand(len(P), m, 3).clone()
+        for b, k in enumerate(kept):
+            near[b, : len(k)] = k
+        return near
 
     def per_point(self, out) -> torch.Tensor:
         """Penetration of the near points into the bodies of `out`: (B, M), far padding 0."""
-        return self.volume.collision_loss(out, self._near(out.vertices), reduction="none")
+        return self.volume.collision_loss(out, self._near(out), reduction="none")
 
     def score(self, x: torch.Tensor) -> torch.Tensor:
         """J per frame. Shape: (B, 144) -> (B,)."""

@@ -29,7 +29,7 @@ class EgoConfig:
     width: int = 512          # denoiser and regressor hidden width
     blocks: int = 4           # residual blocks of the denoiser
     cond_width: int = 256     # keypoint and scene feature widths
-    scene_points: int = 1024  # scene points fed to the scene encoder
+    scene_points: int = 256   # scene points fed to the scene encoder
     scene_size: float = 2.0   # side of the cube around the pelvis they come from (m)
     steps: int = 50           # diffusion steps
     num_betas: int = 10

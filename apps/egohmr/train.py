@@ -1,6 +1,6 @@
 """`volsmpl egohmr train`: the regressor and the diffusion denoiser on the generated training frames (resumable).
 
-    train(out="runs/egohmr", settings=TrainSettings(steps=6000))     # or: volsmpl egohmr train --out runs/egohmr
+    train(out="runs/egohmr", settings=TrainSettings(steps=4000))     # or: volsmpl egohmr train --out runs/egohmr
 
 One loss per step over a batch of training frames:
 - regressor: pelvis L1 + 0.1 betas L2 + 6D pose L2 + mean joint distance of its pose (forward kinematics with the
@@ -33,8 +33,8 @@ DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "egohmr_anny"
 
 @dataclass
 class TrainSettings:
-    steps: int = 6000
-    batch: int = 128
+    steps: int = 4000
+    batch: int = 64
     lr: float = 1e-3
     lr_min: float = 1e-5
     pelvis_noise: float = 0.1
@@ -79,7 +79,7 @@ def losses(net: EgoNet, body, d: dict, sched: Schedule, gen: torch.Generator, s:
     return out
 
 
-def _save(out: Path, net: EgoNet, opt, step: int, gen: torch.Generator, s: TrainSettings, body, extra: dict) -> None:
+def save_model(out: Path, net: EgoNet, opt, step: int, gen: torch.Generator, s: TrainSettings, body, extra: dict) -> None:
     from volsmpl.checkpoint import save_checkpoint
 
     meta = {"body_fingerprint": body.fingerprint, "step": step, "settings": asdict(s), **extra}
@@ -102,7 +102,7 @@ def load_model(path=None, body=None) -> tuple[EgoNet, dict]:
     fp = body.fingerprint if body is not None else None
     state, cfg, meta = load_checkpoint(path, expected_fingerprint=fp)
     if "kp_enc.0.weight" not in state:
-        raise ValueError(f"{path} is not an egohmr checkpoint (it holds {meta.get('model', 'another model')}); "
+        raise ValueError(f"{path} is not an egohmr checkpoint (it holds a {cfg.get('model', 'volsmpl') if isinstance(cfg, dict) else 'different'} network); "
                          f"pass an egohmr checkpoint (volsmpl egohmr train)")
     net = EgoNet(EgoConfig.from_dict(cfg))
     net.load_state_dict(state)
@@ -131,7 +131,7 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
     sched = Schedule(net.config.steps)
     opt = torch.optim.Adam(net.parameters(), lr=s.lr)
     gen = torch.Generator().manual_seed(s.seed)
-    step = 0
+    step, prior_seconds = 0, 0.0
     if resume and (out / "state.pt").is_file():
         net, meta = load_model(out / "model", body)
         net.train().requires_grad_(True)
@@ -140,6 +140,7 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
         opt.load_state_dict(st["opt"])
         gen.set_state(st["gen"])
         step = int(st["step"])
+        prior_seconds = float(meta.get("seconds", 0.0))
         log(f"resumed {out} at step {step}")
     elif resume:
         raise FileNotFoundError(f"--resume: no {out / 'state.pt'}; start without --resume")
@@ -151,7 +152,8 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
         data["rest"] = rest_joints(body, data["betas"])
     log(f"{len(train_frames)} training frames, {len(val_frames)} validation frames ({time.time() - t0:.0f} s)")
     n = len(train_frames)
-    history = []
+    hist_path = out / "history.json"
+    history = json.loads(hist_path.read_text()) if step and hist_path.is_file() else []
     t_train = time.time()
     while step < s.steps:
         lr = s.lr_min + 0.5 * (s.lr - s.lr_min) * (1 + math.cos(math.pi * step / s.steps))
@@ -169,7 +171,7 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
         step += 1
         if step % 100 == 0 or step == s.steps:
             log(f"step {step:6d}  loss {loss.item():.4f}  " + "  ".join(f"{k} {v.item():.4f}" for k, v in terms.items())
-                + f"  lr {lr:.2e}  {(time.time() - t_train) / max(step, 1):.3f} s/step")
+                + f"  lr {lr:.2e}")
         if step % s.save_every == 0 or step == s.steps:
             net.eval()
             val = regressor_and_sample_errors(net, body, val_frames, seed=s.seed)
@@ -178,10 +180,10 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
             log(f"step {step:6d}  validation MPJPE regressor {val['regressor_mpjpe_mm']:.1f} mm "
                 f"(invisible {val['regressor_invisible_mm']:.1f})  diffusion {val['diffusion_mpjpe_mm']:.1f} mm "
                 f"(invisible {val['diffusion_invisible_mm']:.1f})")
-            _save(out, net, opt, step, gen, s, body, {"validation": history[-1], "train_frames": n,
-                                                      "seconds": time.time() - t_train})
-            (out / "history.json").write_text(json.dumps(history, indent=1))
+            save_model(out, net, opt, step, gen, s, body, {"validation": history[-1], "train_frames": n,
+                                                      "seconds": prior_seconds + time.time() - t_train})
+            hist_path.write_text(json.dumps(history, indent=1))
     return out / "model"
 
 
-__all__ = ["TrainSettings", "losses", "train", "load_model", "DEFAULT_CHECKPOINT"]
+__all__ = ["TrainSettings", "losses", "train", "save_model", "load_model", "DEFAULT_CHECKPOINT"]
