@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from volsmpl.scene import farthest_point_sample, make_room, room_points, sample_surface
+from volsmpl.scene import farthest_point_sample, make_room, room_points
+from volsmpl.scene.scan import UNITS, read_scan
 
 N_POINTS = 16384
-UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 BODY_CLEAR = 0.15     # metres: no obstacle point this close (horizontally) to a start or goal, below BODY_HEIGHT
 BODY_HEIGHT = 1.8
 MIN_PAIR_DISTANCE = 1.6   # metres: shorter pairs cannot have furniture between two 0.5 m-clear ends
@@ -37,18 +37,6 @@ class MotionScene:
     floor_y: float = 0.0
     room: object = None
     pairs: list = field(default_factory=list)
-
-
-def check_cloud(points, what: str = "scene") -> np.ndarray:
-    p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise ValueError(f"the {what} cloud must be (N, 3), got shape {p.shape}")
-    if len(p) == 0:
-        raise ValueError(f"the {what} cloud is empty: give a mesh or a point cloud with points")
-    if not np.isfinite(p).all():
-        raise ValueError(f"the {what} cloud holds {int((~np.isfinite(p)).any(1).sum())} points with NaN or Inf "
-                         f"coordinates; clean the file first")
-    return p
 
 
 def check_endpoint(scene: MotionScene, xz, which: str) -> np.ndarray:
@@ -139,39 +127,7 @@ def load_scene(path, up: str = "y", units: str = "m", n: int = N_POINTS, floor_y
     """A user's mesh or point cloud as a MotionScene (module docstring). The floor is at `floor_y` (metres, after
     conversion; default the 1st percentile of the heights) and the floor points are those within floor_band; the cloud
     is shifted so that the floor is at y = 0."""
-    if units not in UNITS:
-        raise ValueError(f"--units must be one of {', '.join(UNITS)}, got {units!r}")
-    p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"--scene {path}: no such file")
-    suffix = p.suffix.lower()
-    if suffix in (".npy", ".npz", ".txt", ".csv"):
-        if suffix == ".npy":
-            arr = np.load(p)
-        elif suffix == ".npz":
-            z = np.load(p)
-            arr = z["points"] if "points" in z else z[z.files[0]]
-        else:
-            arr = np.loadtxt(p, delimiter="," if suffix == ".csv" else None, ndmin=2)[:, :3]
-        pts = check_cloud(arr)
-    else:
-        import trimesh
-        try:
-            geom = trimesh.load(p, force=None)
-        except Exception as e:  # noqa: BLE001 - any reader error is the file's problem
-            raise ValueError(f"--scene {path}: cannot read it ({type(e).__name__}: {e})") from None
-        if isinstance(geom, trimesh.Scene):
-            geom = geom.to_geometry() if hasattr(geom, "to_geometry") else geom.dump(concatenate=True)
-        if isinstance(geom, trimesh.Trimesh) and len(geom.faces):
-            if not np.isfinite(geom.vertices).all():
-                raise ValueError(f"--scene {path}: the mesh has NaN or Inf vertices")
-            pts = sample_surface(geom, n * 4, seed=seed)[0]
-        elif hasattr(geom, "vertices"):
-            pts = np.asarray(geom.vertices)
-        else:
-            raise ValueError(f"--scene {path}: not a mesh or a point cloud ({type(geom).__name__})")
-        pts = check_cloud(pts)
-    pts = _to_y_up(pts * UNITS[units], up)
+    pts = _to_y_up(read_scan(path, units, n * 4, seed), up)
     if len(pts) > n:
         pts = pts[farthest_point_sample(pts, n, seed=seed)]
     fy = float(np.percentile(pts[:, 1], 1.0)) if floor_y is None else float(floor_y)
@@ -180,4 +136,4 @@ def load_scene(path, up: str = "y", units: str = "m", n: int = N_POINTS, floor_y
         raise ValueError(f"--scene {path}: no floor points at height {fy:.3f} m (+/- {floor_band} m); check --up, "
                          f"--units and --floor-y")
     pts[:, 1] -= fy   # the walking model's floor is y = 0
-    return MotionScene(p.stem, pts.astype(np.float32), floor, 0.0)
+    return MotionScene(Path(path).stem, pts.astype(np.float32), floor, 0.0)

@@ -1,0 +1,71 @@
+"""A user's scene file as a point cloud: any mesh or point-cloud format trimesh reads (ply, obj, off, stl, glb,
+xyz...) or a .npy / .npz / .txt / .csv array of points, in metres.
+
+    pts = read_scan("scan.ply", units="mm", n_surface=65536)    # (N, 3) float64, metres
+    check_cloud(pts, "scene")                                   # clear errors for empty / NaN / wrong shape
+
+A mesh is sampled on its surface (n_surface area-weighted points); a point cloud is read as it is.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .points import sample_surface
+
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+def check_cloud(points, what: str = "scene") -> np.ndarray:
+    """(N, 3) float64 of a cloud; ValueError naming the problem for a wrong shape, no points or NaN/Inf."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise ValueError(f"the {what} cloud must be (N, 3), got shape {p.shape}")
+    if len(p) == 0:
+        raise ValueError(f"the {what} cloud is empty: give a mesh or a point cloud with points")
+    if not np.isfinite(p).all():
+        raise ValueError(f"the {what} cloud holds {int((~np.isfinite(p)).any(1).sum())} points with NaN or Inf "
+                         f"coordinates; clean the file first")
+    return p
+
+
+def read_scan(path, units: str = "m", n_surface: int = 65536, seed: int = 0, option: str = "--scene") -> np.ndarray:
+    """The points of a scene file in metres (module docstring). Shape: -> (N, 3) float64.
+    option: the command-line option named in error messages."""
+    if units not in UNITS:
+        raise ValueError(f"--units must be one of {', '.join(UNITS)}, got {units!r}")
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{option} {path}: no such file")
+    suffix = p.suffix.lower()
+    if suffix in (".npy", ".npz", ".txt", ".csv"):
+        if suffix == ".npy":
+            arr = np.load(p)
+        elif suffix == ".npz":
+            z = np.load(p)
+            arr = z["points"] if "points" in z else z[z.files[0]]
+        else:
+            arr = np.loadtxt(p, delimiter="," if suffix == ".csv" else None, ndmin=2)[:, :3]
+        pts = check_cloud(arr)
+    else:
+        import trimesh
+        try:
+            geom = trimesh.load(p, force=None)
+        except Exception as e:  # noqa: BLE001 - any reader error is the file's problem
+            raise ValueError(f"{option} {path}: cannot read it ({type(e).__name__}: {e})") from None
+        if isinstance(geom, trimesh.Scene):
+            geom = geom.to_geometry() if hasattr(geom, "to_geometry") else geom.dump(concatenate=True)
+        if isinstance(geom, trimesh.Trimesh) and len(geom.faces):
+            if not np.isfinite(geom.vertices).all():
+                raise ValueError(f"{option} {path}: the mesh has NaN or Inf vertices")
+            pts = sample_surface(geom, n_surface, seed=seed)[0]
+        elif hasattr(geom, "vertices"):
+            pts = np.asarray(geom.vertices)
+        else:
+            raise ValueError(f"{option} {path}: not a mesh or a point cloud ({type(geom).__name__})")
+        pts = check_cloud(pts)
+    return pts * UNITS[units]
+
+
+__all__ = ["UNITS", "check_cloud", "read_scan"]
