@@ -94,3 +94,40 @@ def test_bad_input_gets_one_line(tmp_path, capsys, tiny_ckpt):
     assert "not an egohmr checkpoint" in capsys.readouterr().err
     assert main(["egohmr", "sample", "--scale", "volsmpl=abc", "--checkpoint", str(ckpt), "--out", str(tmp_path / "o")]) == 2
     assert "not a number" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_user_frame_and_scan_run_end_to_end(tmp_path, frames, tiny_ckpt):
+    """A generated frame written as a user's files: the room scan in world millimetres, the camera as
+    world_to_camera; the run must read both and see the same camera-frame scene as the generator."""
+    from volsmpl.apps.egohmr.data import make_group, scene_mesh
+    from volsmpl.apps.egohmr.userframe import camera_points, load_user_frame
+    from volsmpl.scene import make_room
+
+    ckpt, _ = tiny_ckpt
+    f = frames[0]
+    room = make_room(f.room_seed).mesh()
+    scan = room.copy()
+    scan.apply_scale(1000.0)
+    scan.export(tmp_path / "room.ply")
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = f.R, f.t
+    doc = {"K": f.K.tolist(), "image_size": list(f.image_size), "keypoints": f.keypoints.tolist(),
+           "conf": f.conf.tolist(), "world_to_camera": T.tolist()}
+    (tmp_path / "frame.json").write_text(json.dumps(doc))
+    uf = load_user_frame(tmp_path / "frame.json")
+    cam_mesh = scene_mesh(f)
+    assert np.allclose(camera_points(uf, np.asarray(room.vertices)), np.asarray(cam_mesh.vertices), atol=1e-6)
+    out = tmp_path / "out"
+    rc = main(["egohmr", "sample", "--frame", str(tmp_path / "frame.json"), "--scene", str(tmp_path / "room.ply"),
+               "--units", "mm", "--guide", "none,volsmpl", "--checkpoint", str(ckpt), "--out", str(out)])
+    assert rc == 0
+    res = json.loads((out / "results.json").read_text())
+    assert set(res["summary"]) == {"none", "volsmpl"} and (out / "frame_frame.png").is_file()
+    bad = dict(doc, keypoints=f.keypoints[:17].tolist())
+    (tmp_path / "bad.json").write_text(json.dumps(bad))
+    with pytest.raises(ValueError, match="24 SMPL joints"):
+        load_user_frame(tmp_path / "bad.json")
+    (tmp_path / "nan.json").write_text(json.dumps(dict(doc, conf=[float("nan")] * 24)).replace("NaN", "NaN"))
+    with pytest.raises(ValueError, match="NaN"):
+        load_user_frame(tmp_path / "nan.json")

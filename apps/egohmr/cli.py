@@ -5,6 +5,7 @@ Table 4, supp. D.2).
     volsmpl egohmr train --out runs/egohmr [--steps 4000] [--resume]
     volsmpl egohmr tune --split val --out docs/egohmr/tune.json     # guidance scale per guide, on val
     volsmpl egohmr sample --guide none,volsmpl,coap,mesh --split test [--frames N] --out out/egohmr
+    volsmpl egohmr sample --frame my_frame.json --scene scan.ply [--units mm] --out out/mine   # apps/egohmr/userframe.py
 
 Writes OUT/results.json (config, options, summary.<guide>, the paper's Table 4, per-frame records, the measured
 largest batch per guide, machine meta) and OUT/frame_<name>.png for the first --render frames.
@@ -53,6 +54,9 @@ def add_parser(sub):
     p.add_argument("--seed", type=int, default=0, help="data and sampling seed")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
+    p.add_argument("--frame", default=None, help="sample: a user's frame file (JSON, apps/egohmr/userframe.py)")
+    p.add_argument("--scene", default=None, help="with --frame: the scene (mesh or point cloud file)")
+    p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="--scene's units")
     p.add_argument("--steps", type=int, default=d.steps, help="train: optimisation steps")
     p.add_argument("--resume", action="store_true", help="train: continue OUT's run")
     return p
@@ -116,9 +120,11 @@ def run(args) -> int:
         path = train(args.out or "runs/egohmr", s, resume=args.resume)
         print(f"wrote {path}.safetensors")
         return 0
-    from .run import run_sample, run_tune
+    from .run import run_sample, run_tune, run_user_frame
 
-    return run_tune(args) if args.action == "tune" else run_sample(args)
+    if args.action == "tune":
+        return run_tune(args)
+    return run_user_frame(args) if (args.frame or args.scene) else run_sample(args)
 
 
 __all__ = ["add_parser", "run", "parse_guides", "scales_of", "options_of", "GUIDES", "PAPER_SCALE"]

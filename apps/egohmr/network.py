@@ -26,9 +26,9 @@ from .pose import NUM_JOINTS, POSE_DIM
 class EgoConfig:
     """Network sizes and the data the network was trained for."""
 
-    width: int = 512          # denoiser and regressor hidden width
+    width: int = 256          # denoiser and regressor hidden width
     blocks: int = 4           # residual blocks of the denoiser
-    cond_width: int = 256     # keypoint and scene feature widths
+    cond_width: int = 128     # keypoint and scene feature widths
     scene_points: int = 256   # scene points fed to the scene encoder
     scene_size: float = 2.0   # side of the cube around the pelvis they come from (m)
     steps: int = 50           # diffusion steps

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .evaluate import GUIDE_CUBE, GUIDE_POINTS
+
 TUNE_MPJPE_SLACK_MM = 2.0
 
 
@@ -152,6 +154,89 @@ def run_tune(args) -> int:
     return 0
 
 
+def _user_crop(points: np.ndarray, centre: np.ndarray, n: int, seed: int) -> np.ndarray:
+    from volsmpl.scene import crop_cube, subsample
+
+    from .data import MIN_SCENE_POINTS
+
+    c = points[crop_cube(points, centre, GUIDE_CUBE)]
+    if len(c) < MIN_SCENE_POINTS:
+        raise ValueError(f"the scene has {len(c)} points in the {GUIDE_CUBE:g} m cube around the estimated pelvis "
+                         f"{np.round(centre, 2).tolist()} (camera frame, m): check --units and 'world_to_camera', or "
+                         f"give a denser scan")
+    return c[subsample(c, n, seed=seed)]
+
+
+def run_user_frame(args) -> int:
+    """A user's frame file and scene scan: each guide's sample, its collision ratio and contact (exact tests on
+    the scan's points), and a figure; no ground truth, so no joint errors."""
+    import volsmpl
+    from volsmpl.mesh_distance import winding_numbers
+    from volsmpl.outputs import check_writable, write_atomic
+    from volsmpl.provenance import machine_info
+    from volsmpl.render import render_camera_view, grid, save_png
+    from volsmpl.scene.scan import read_scan
+    from scipy.spatial import cKDTree
+
+    from .cli import options_of, parse_guides, scales_of
+    from .dataset import keypoint_input
+    from .evaluate import draw
+    from .figures import camera_of
+    from .pose import pose_body
+    from .train import load_model
+    from .userframe import camera_points, load_user_frame
+
+    if not (args.frame and args.scene):
+        raise ValueError("a user's frame needs both --frame FILE.json and --scene SCAN (see apps/egohmr/userframe.py)")
+    guides = parse_guides(args.guide)
+    scales = scales_of(args, guides)
+    out = check_writable(args.out or "out/egohmr_user", "dir", "--out")
+    frame = load_user_frame(args.frame)
+    scan = camera_points(frame, read_scan(args.scene, args.units, n_surface=1_000_000, seed=args.seed))
+    body = volsmpl.create_body()
+    net, meta = load_model(args.checkpoint, body)
+    with torch.no_grad():
+        c_kp = net.keypoints(torch.as_tensor(keypoint_input(frame))[None])
+        pelvis, betas, pose_reg = net.regress(c_kp)
+    centre = pelvis[0].numpy().astype(np.float64)
+    cond_pts = _user_crop(scan, centre, net.config.scene_points, args.seed) - centre
+    guide_pts = _user_crop(scan, centre, GUIDE_POINTS, args.seed + 7919)
+    d = {"c_kp": c_kp, "pelvis_hat": pelvis, "betas_hat": betas,
+         "scene_cond": torch.as_tensor(cond_pts, dtype=torch.float32)[None],
+         "guide_points": torch.as_tensor(guide_pts, dtype=torch.float32)[None]}
+    tree = cKDTree(guide_pts)
+    faces = torch.as_tensor(body.faces)
+    summary, panels = {}, []
+    cam = camera_of(frame.K, frame.image_size)
+    for g in guides:
+        vol = _volume(g)
+        t0 = time.perf_counter()
+        x, _ = draw(net, body, d, vol, options_of(args, scales[g]), seed=args.seed)
+        secs = time.perf_counter() - t0
+        with torch.no_grad():
+            v = pose_body(body, betas, x, pelvis).vertices[0]
+        inside = (winding_numbers(v, faces, d["guide_points"][0]) > 0.5).numpy()
+        near = tree.query(v.numpy(), k=1)[0]
+        summary[g] = {"n_frames": 1, "collision_ratio": float(inside.mean()),
+                      "contact_pct": 100.0 * float((near <= 0.02).any() or inside.any()), "s_per_frame": secs,
+                      "scale": scales[g]}
+        red = np.tile([[0.9, 0.1, 0.1]], (int(inside.sum()), 1))
+        grey = np.tile([[0.6, 0.6, 0.6]], (len(guide_pts) - int(inside.sum()), 1))
+        img = render_camera_view([(v.numpy(), body.faces, (0.35, 0.55, 0.9))], cam,
+                                 points=np.concatenate([guide_pts[inside], guide_pts[~inside]]),
+                                 point_colors=np.concatenate([red, grey]), point_radius=1)
+        panels.append((img, f"{g}: {int(inside.sum())} scene points inside"))
+        print(f"{g:8s} collision {summary[g]['collision_ratio']:.4f}  contact {summary[g]['contact_pct']:.0f} %  "
+              f"{secs:.2f} s")
+    save_png(out / f"frame_{frame.name}.png", grid([p[0] for p in panels], [p[1] for p in panels], cols=2))
+    doc = {"frame": str(args.frame), "scene": str(args.scene), "units": args.units, "guides": guides,
+           "scales": scales, "summary": summary, "pelvis": centre.tolist(), "figures": {frame.name: f"frame_{frame.name}.png"},
+           "checkpoint": args.checkpoint or "apps/egohmr/egohmr_anny", "meta": machine_info(args.device)}
+    write_atomic(out / "results.json", json.dumps(doc, indent=1))
+    print(f"wrote {out / 'results.json'}")
+    return 0
+
+
 def format_table(summary: dict) -> str:
     """Our rows beside the paper's Table 4."""
     from volsmpl import paper
@@ -170,4 +255,4 @@ def format_table(summary: dict) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["run_sample", "run_tune", "format_table"]
+__all__ = ["run_sample", "run_tune", "run_user_frame", "format_table"]

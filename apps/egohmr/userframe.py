@@ -1,0 +1,91 @@
+"""A user's own egocentric frame: 2D keypoints and a camera in a JSON file, the scene in any mesh or point-cloud file.
+
+    {
+      "K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]],       # pinhole intrinsics, pixels
+      "image_size": [H, W],
+      "keypoints": [[u, v], ...],                        # the 24 SMPL joints in SMPL order, pixels
+      "conf": [c0, ..., c23],                            # detector confidences in [0, 1]; 0 = not detected
+      "world_to_camera": [[...], [...], [...], [...]]    # optional 4x4 (OpenCV camera axes: x right, y down,
+    }                                                    #   z forward); absent: the scene file is in camera coordinates
+
+The scene file (`--scene`, read by volsmpl.scene.scan, `--units` m / cm / mm) is taken in the coordinates
+`world_to_camera` maps from. The network sees everything in the camera frame, so no up axis is needed: the camera's
+pose carries it.
+
+    frame = load_user_frame("my_frame.json")
+    pts = camera_points(frame, read_scan("scan.ply", units="mm", n_surface=1_000_000))   # (N, 3) camera frame
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .pose import NUM_JOINTS
+
+
+@dataclass
+class UserFrame:
+    name: str
+    K: np.ndarray             # (3, 3)
+    image_size: tuple         # (H, W)
+    keypoints: np.ndarray     # (24, 2)
+    conf: np.ndarray          # (24,)
+    world_to_camera: np.ndarray  # (4, 4)
+
+
+def _array(d: dict, key: str, shape: tuple, where: str) -> np.ndarray:
+    if key not in d:
+        raise ValueError(f"{where}: missing '{key}' (format in apps/egohmr/userframe.py)")
+    try:
+        a = np.asarray(d[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where}: '{key}' is not an array of numbers") from None
+    if a.shape != shape:
+        extra = (f"; give the {NUM_JOINTS} SMPL joints in SMPL order (0 confidence for the ones not detected)"
+                 if key in ("keypoints", "conf") else "")
+        raise ValueError(f"{where}: '{key}' has shape {a.shape}, expected {shape}{extra}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{where}: '{key}' holds NaN or Inf; give 0 confidence (and any finite keypoint) for "
+                         f"joints that were not detected")
+    return a
+
+
+def load_user_frame(path) -> UserFrame:
+    """The frame file (module docstring), checked: one clear ValueError naming the problem otherwise."""
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"--frame {path}: no such file")
+    try:
+        d = json.loads(p.read_text())
+    except ValueError as e:
+        raise ValueError(f"--frame {path}: not valid JSON ({e})") from None
+    where = f"--frame {path}"
+    K = _array(d, "K", (3, 3), where)
+    if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
+        raise ValueError(f"{where}: 'K' must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
+    size = _array(d, "image_size", (2,), where)
+    if (size < 1).any():
+        raise ValueError(f"{where}: 'image_size' must be [H, W] in pixels, got {size.tolist()}")
+    kp = _array(d, "keypoints", (NUM_JOINTS, 2), where)
+    conf = _array(d, "conf", (NUM_JOINTS,), where)
+    if ((conf < 0) | (conf > 1)).any():
+        raise ValueError(f"{where}: 'conf' values must lie in [0, 1]")
+    if (conf > 0).sum() < 4:
+        raise ValueError(f"{where}: only {(conf > 0).sum()} keypoints have a confidence above 0; at least 4 are needed")
+    T = _array(d, "world_to_camera", (4, 4), where) if "world_to_camera" in d else np.eye(4)
+    R = T[:3, :3]
+    if not np.allclose(T[3], [0, 0, 0, 1]) or not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
+        raise ValueError(f"{where}: 'world_to_camera' must be a rigid 4x4 transform (rotation and translation)")
+    return UserFrame(p.stem, K, (int(size[0]), int(size[1])), np.where(conf[:, None] > 0, kp, 0.0), conf, T)
+
+
+def camera_points(frame: UserFrame, points: np.ndarray) -> np.ndarray:
+    """Scene points (N, 3) in the frame file's world coordinates -> camera coordinates."""
+    T = frame.world_to_camera
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+__all__ = ["UserFrame", "load_user_frame", "camera_points"]
