@@ -87,8 +87,11 @@ def _euler(name: str, rng: np.random.Generator | None) -> np.ndarray:
 
 
 def self_contact_bodies(n: int = 16, seed: int = CONTACT_SEED, num_betas: int = 10) -> Dict[str, torch.Tensor]:
-    """The self-contact split (module docstring): dict of float32 CPU tensors betas (n, num_betas), global_orient
-    (n, 3), body_pose (n, 69), transl (n, 3); bit-identical for equal (n, seed, num_betas), body i independent of n."""
+    """The self-contact split (module docstring), float32 CPU tensors, bit-identical for equal (n, seed, num_betas),
+    body i independent of n.
+
+    Shape: -> betas (n, num_betas), global_orient (n, 3), body_pose (n, 69), transl (n, 3).
+    """
     from scipy.spatial.transform import Rotation
 
     from .body.shapes import sample_betas

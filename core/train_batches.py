@@ -32,8 +32,11 @@ def _sync(device: torch.device) -> None:
 
 
 def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> dict:
-    """The training batch of (step, rank), on the body's device: body parameters, the posed bodies (vertices,
-    joints, full_pose), query points (B, N, 3), exact SDF (B, N), timing {'make_s', 'gt_s'}."""
+    """The training batch of (step, rank), on the body's device: body parameters, the posed bodies, query points,
+    exact SDF, timing {'make_s', 'gt_s'} (seconds, the device synchronised).
+
+    Shape: -> points (B, N, 3), sdf (B, N), posed vertices (B, V, 3), joints (B, J, 3), full_pose (B, 3J).
+    """
     dev = body.v_template.device
     _sync(dev)
     t0 = time.perf_counter()
