@@ -41,6 +41,8 @@ def add_parser(sub):
                    help="guidance scale a of a guide (repeatable); default: --tuned's, else the paper's "
                         f"({', '.join(f'{k} {v:g}' for k, v in PAPER_SCALE.items())})")
     p.add_argument("--tuned", default=None, help="a `tune` result whose best scales to use")
+    p.add_argument("--factors", default=",".join(f"{f:g}" for f in TUNE_FACTORS),
+                   help="tune: the scales tried, as factors of the paper's (comma-separated)")
     p.add_argument("--guide-steps", type=int, default=10, help="guided last steps (paper 10; authors' code 11)")
     p.add_argument("--plain-steps", type=int, default=5, help="last steps without Sigma_t (paper 5)")
     p.add_argument("--plain-factor", type=float, default=1.0, help="their step a*F*grad (paper F=1; code 0.01)")

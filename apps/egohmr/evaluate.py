@@ -74,9 +74,10 @@ def draw(net, body, d: dict, volume=None, opts: GuideOptions | None = None, seed
 
 
 def sample_frames(net, body, frames, prep: dict, volume=None, opts: GuideOptions | None = None, batch: int = 16,
-                  seed: int = 0, scenes=None) -> list[dict]:
+                  seed: int = 0, scenes=None, poses: torch.Tensor | None = None) -> list[dict]:
     """Per-frame records of one guide over frames (prep: `prepare` of the same frames): errors (mm), collision
-    ratio, contact, sampling seconds per frame. scenes: the frames' scene meshes (camera frame) for contact."""
+    ratio, contact, sampling seconds per frame. scenes: the frames' scene meshes (camera frame) for contact.
+    poses: score these pose vectors (B, 144) instead of sampling (e.g. the regressor's, prep['pose_reg'])."""
     from .data import scene_mesh
 
     recs = []
@@ -85,7 +86,7 @@ def sample_frames(net, body, frames, prep: dict, volume=None, opts: GuideOptions
         idx = torch.arange(s, min(s + batch, len(frames)))
         d = _rows(prep, idx)
         t0 = time.perf_counter()
-        x, _ = draw(net, body, d, volume, opts, seed=seed + s)
+        x = draw(net, body, d, volume, opts, seed=seed + s)[0] if poses is None else poses[idx]
         secs = (time.perf_counter() - t0) / len(idx)
         with torch.no_grad():
             out = pose_body(body, d["betas_hat"], x, d["pelvis_hat"])

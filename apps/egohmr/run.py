@@ -63,6 +63,11 @@ def run_sample(args) -> int:
     out = check_writable(args.out or "out/egohmr", "dir", "--out")
     body, net, meta, frames, prep, scenes = _setup(args, args.split)
     summary, records, options, batches = {}, {}, {}, {}
+    # the no-diffusion baseline: the regressor's own pose, scored by the same tests (not a guide: no row in Table 4)
+    reg = summarize(sample_frames(net, body, frames, prep, batch=args.batch, scenes=scenes, poses=prep["pose_reg"]))
+    reg.pop("s_per_frame")
+    print(f"regressor (no diffusion): MPJPE {reg['mpjpe_mm']:.1f} mm (vis. {reg['mpjpe_visible_mm']:.1f}, invis. "
+          f"{reg['mpjpe_invisible_mm']:.1f})  collision {reg['collision_ratio']:.4f}")
     for g in guides:
         opts = options_of(args, scales[g])
         vol = _volume(g)
@@ -85,11 +90,13 @@ def run_sample(args) -> int:
         for r, rec in zip(records[g], recs):
             r["_pose"] = rec["pose"]
         result = {"split": args.split, "frames": len(frames), "seed": args.seed, "guides": guides, "scales": scales,
-                  "options": options, "budget_mb": args.budget_mb, "max_batch": batches, "summary": summary,
+                  "options": options, "regressor": reg, "budget_mb": args.budget_mb, "max_batch": batches, "summary": summary,
                   "paper": paper.rows("egohmr"), "checkpoint": args.checkpoint or "apps/egohmr/egohmr_anny",
                   "checkpoint_meta": {k: meta.get(k) for k in ("step", "validation", "train_frames", "seconds")},
                   "cases": {k: [{kk: vv for kk, vv in r.items() if kk != "_pose"} for r in v] for k, v in records.items()},
                   "meta": machine_info(args.device)}
+        if args.tuned:
+            result["tuning"] = json.loads(Path(args.tuned).read_text())
         write_atomic(out / "results.json", json.dumps(result, indent=1))
     # figures: the first frames, every guide's sample with the scene points inside it
     faces = torch.as_tensor(body.faces)
@@ -122,10 +129,16 @@ def run_tune(args) -> int:
     from volsmpl.outputs import check_writable, write_atomic
     from volsmpl.provenance import machine_info
 
-    from .cli import PAPER_SCALE, TUNE_FACTORS, options_of, parse_guides
+    from .cli import PAPER_SCALE, options_of, parse_guides
     from .evaluate import sample_frames, summarize
 
     guides = [g for g in parse_guides(args.guide) if g != "none"]
+    try:
+        factors = [float(f) for f in args.factors.split(",") if f.strip()]
+    except ValueError:
+        raise ValueError(f"--factors {args.factors!r}: give comma-separated numbers, e.g. 0.1,1,10") from None
+    if not factors or any(not f > 0 for f in factors):
+        raise ValueError(f"--factors {args.factors!r}: give positive factors of the paper's scales")
     split = args.split if args.split != "test" else "val"
     if args.split == "test":
         print("tune: tuning runs on the val split (the test split is for reporting only)")
@@ -138,7 +151,7 @@ def run_tune(args) -> int:
     for g in guides:
         vol = _volume(g)
         cands = []
-        for f in TUNE_FACTORS:
+        for f in factors:
             a = PAPER_SCALE[g] * f
             s = summarize(sample_frames(net, body, frames, prep, vol, options_of(args, a), args.batch, args.seed, scenes))
             rows.append({"guide": g, "scale": a, **s})
@@ -147,7 +160,7 @@ def run_tune(args) -> int:
         ok = [(a, s) for a, s in cands if s["mpjpe_mm"] <= base["mpjpe_mm"] + TUNE_MPJPE_SLACK_MM]
         best[g] = min(ok or cands, key=lambda c: (c[1]["collision_ratio"], c[1]["mpjpe_mm"]))[0]
     doc = {"split": split, "frames": len(frames), "rule": f"lowest collision ratio with MPJPE within "
-           f"{TUNE_MPJPE_SLACK_MM} mm of the unguided sampler's", "factors": list(TUNE_FACTORS),
+           f"{TUNE_MPJPE_SLACK_MM} mm of the unguided sampler's", "factors": factors,
            "paper_scales": PAPER_SCALE, "rows": rows, "best": best, "meta": machine_info(args.device)}
     write_atomic(path, json.dumps(doc, indent=1))
     print(f"best scales {best}; wrote {path}")
