@@ -20,7 +20,7 @@ from volsmpl.train_config import TrainConfig
     ("lr_final", float("nan"), ValueError), ("steps", 0, ValueError), ("micro_batch", 0, ValueError),
     ("n_uniform", -3, ValueError), ("ckpt_every", 0, ValueError), ("keep_ckpts", 0, ValueError),
     ("abs_weight", float("nan"), ValueError), ("gt_rays", 2, ValueError), ("seed", "1", TypeError),
-    ("surface_sigma", (0.05, 0.01), ValueError), ("surface_sigma", (0.0, 0.01), ValueError),
+    ("surface_sigma", (), ValueError), ("surface_sigma", (-0.01, 0.01), ValueError), ("surface_sigma", ("a",), ValueError),
     ("body_surface_sigma", (float("nan"), 0.01), ValueError), ("num_threads", True, TypeError),
 ])
 def test_train_config_out_of_range(field, value, error):
@@ -34,6 +34,10 @@ def test_train_config_no_query_points():
     with pytest.raises(ValueError, match="no query points"):
         TrainConfig(n_uniform=0, n_surface=0, n_body_surface=0)
     TrainConfig(n_uniform=0, n_surface=1)  # one kind of point is enough
+
+
+def test_train_config_sigma_mixtures_accepted():
+    TrainConfig(surface_sigma=(0.01, 0.05, 0.002), body_surface_sigma=(0.0,))  # one or more, 0 on the surface
 
 
 @pytest.mark.parametrize("setting", ["batch_size=-1", "lr=-1", "steps=0", "micro_batch=0"])
