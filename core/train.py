@@ -424,6 +424,10 @@ def add_parser(sub):
 def run(args) -> int:
     from .outputs import check_writable
     check_writable(args.out, "dir", "--out")  # before any work: a bad run folder fails in seconds
+    if args.max_steps is not None and args.max_steps < 0:
+        raise ValueError(f"--max-steps {args.max_steps}: give a number of steps >= 0.")
+    if args.max_hours is not None and not (math.isfinite(args.max_hours) and args.max_hours > 0):
+        raise ValueError(f"--max-hours {args.max_hours}: give a finite number of hours > 0.")
     d = {}
     if args.config:
         d = json.loads(Path(args.config).read_text())

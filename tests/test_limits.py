@@ -48,6 +48,13 @@ def test_train_cli_bad_setting_exits_non_zero_in_one_line(tmp_path, capsys, sett
     assert not (tmp_path / "run" / "latest").exists()
 
 
+@pytest.mark.parametrize("flags", [["--max-steps", "-1"], ["--max-hours", "nan"], ["--max-hours", "0"]])
+def test_train_cli_bad_limits(tmp_path, capsys, flags):
+    assert main(["train", "--out", str(tmp_path / "run"), *flags]) == 2
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1 and flags[0] in err[0]
+
+
 def test_box_sdf_far_points_exact():
     lo, hi = torch.tensor([-0.1, -0.2, -0.3]), torch.tensor([0.1, 0.2, 0.3])
     for s in (1e3, 1e19, 1e20, 1e30, 1e37):
