@@ -11,20 +11,19 @@ torch.set_num_threads(2)
 
 
 def pytest_collection_modifyitems(config, items):
-    from volsmpl.models import model_kind
-    has_ckpt = model_kind("volsmpl").default_checkpoint.with_suffix(".safetensors").exists()
     for item in items:
-        if "needs_checkpoint" in item.keywords and not has_ckpt:  # a missing shipped file is a failure, not a skip
-            item.add_marker(pytest.mark.usefixtures("_shipped_checkpoint_missing"))
         if item.get_closest_marker("cuda") is not None and not torch.cuda.is_available():
             item.add_marker(pytest.mark.skip(reason="no CUDA GPU"))
 
 
-@pytest.fixture
-def _shipped_checkpoint_missing():
-    from volsmpl.models import model_kind
-    pytest.fail(f"the shipped checkpoint {model_kind('volsmpl').default_checkpoint}.safetensors is missing: restore it "
-                "(git checkout core/assets) before running the tests that need it", pytrace=False)
+def pytest_runtest_setup(item):
+    """A test that needs the shipped checkpoint fails (not skips) when the file is missing."""
+    if item.get_closest_marker("needs_checkpoint") is not None:
+        from volsmpl.models import model_kind
+        path = model_kind("volsmpl").default_checkpoint.with_suffix(".safetensors")
+        if not path.exists():
+            pytest.fail(f"the shipped checkpoint {path} is missing: restore it (git checkout core/assets) before "
+                        "running the tests that need it", pytrace=False)
 
 
 @pytest.fixture(scope="session")
