@@ -178,10 +178,11 @@ def run(args) -> int:
             per_model[m].append(r)
             results[m] = r
             a, b = r.after, r.before
+            num = lambda d, k: float("nan") if d.get(k) is None else d[k]  # noqa: E731 - None: not defined (a ball's rotation)
             print(f"{case.name:24s} {m:8s} {r.ms_per_iter:8.2f} ms/it  collision {b['collision_pct']:5.1f} -> "
-                  f"{a['collision_pct']:5.1f} %  contact {b.get('contact_cm', float('nan')):6.2f} -> "
-                  f"{a.get('contact_cm', float('nan')):6.2f} cm  object {a.get('obj_trans_err_cm', float('nan')):6.2f} cm "
-                  f"{a.get('obj_rot_err_deg', float('nan')):5.1f} deg")
+                  f"{a['collision_pct']:5.1f} %  contact {num(b, 'contact_cm'):6.2f} -> "
+                  f"{num(a, 'contact_cm'):6.2f} cm  object {num(a, 'obj_trans_err_cm'):6.2f} cm "
+                  f"{num(a, 'obj_rot_err_deg'):5.1f} deg")
         if i < args.render:
             case_panel(out / f"case_{case.name}.png", problem, results)
         # results so far, after every case: a long run stopped early still leaves its finished cases
