@@ -131,3 +131,24 @@ def test_user_frame_and_scan_run_end_to_end(tmp_path, frames, tiny_ckpt):
     (tmp_path / "nan.json").write_text(json.dumps(dict(doc, conf=[float("nan")] * 24)).replace("NaN", "NaN"))
     with pytest.raises(ValueError, match="NaN"):
         load_user_frame(tmp_path / "nan.json")
+
+
+@pytest.mark.cuda
+@pytest.mark.parametrize("device", ["cpu", "cuda"])
+def test_sampling_gives_the_same_poses_on_every_device(body, frames, tiny_ckpt, device):
+    """The same noise (drawn by the CPU generator) and network give the same guided samples on CPU and CUDA."""
+    if device == "cuda" and not torch.cuda.is_available():
+        pytest.skip("no CUDA GPU")
+    from volsmpl.apps.egohmr.evaluate import draw
+
+    _, net = tiny_ckpt
+    ref = draw(net, body, prepare(net, body, frames, n_guide=500), volsmpl.attach_volume(volsmpl.create_body()),
+               GuideOptions(scale=30.0), seed=3)[0]
+    dev_net = EgoNet(TINY).to(device)
+    dev_net.load_state_dict(net.state_dict())
+    dev_body = volsmpl.create_body().to(device)
+    d = prepare(dev_net, dev_body, frames, n_guide=500)
+    x = draw(dev_net, dev_body, d, volsmpl.attach_volume(volsmpl.create_body()).to(device), GuideOptions(scale=30.0),
+             seed=3)[0]
+    assert x.device.type == device
+    assert torch.allclose(x.cpu(), ref, atol=1e-3)

@@ -100,8 +100,9 @@ def options_of(args, scale: float):
 
 
 def run(args) -> int:
-    if args.device == "cuda" and not torch.cuda.is_available():
-        raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
+    from volsmpl.devices import check_device
+
+    check_device(args.device)
     if args.threads:
         torch.set_num_threads(args.threads)
     if args.batch < 1:
@@ -118,7 +119,7 @@ def run(args) -> int:
     if args.action == "train":
         from .train import TrainSettings, train
 
-        s = TrainSettings(steps=args.steps, seed=args.seed, threads=args.threads)
+        s = TrainSettings(steps=args.steps, seed=args.seed, threads=args.threads, device=args.device)
         path = train(args.out or "runs/egohmr", s, resume=args.resume)
         print(f"wrote {path}.safetensors")
         return 0

@@ -98,9 +98,10 @@ def sample(denoise: Callable, shape: tuple, schedule: Schedule, generator: torch
         x_0 (B, D).
     """
     T = schedule.T
-    x = torch.randn(shape, generator=generator, dtype=dtype, device=device) if x_T is None else x_T
+    # noise drawn by the (CPU) generator, then moved: the same samples on every device
+    x = torch.randn(shape, generator=generator, dtype=dtype).to(device) if x_T is None else x_T
     if noises is None:
-        noises = torch.randn((T, *shape), generator=generator, dtype=dtype, device=device)
+        noises = torch.randn((T, *shape), generator=generator, dtype=dtype).to(x.device)
     for t in range(T - 1, -1, -1):
         tt = torch.full((shape[0],), t, dtype=torch.long, device=x.device)
         with torch.no_grad():

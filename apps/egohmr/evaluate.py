@@ -44,13 +44,14 @@ def prepare(net, body, frames, n_guide: int = GUIDE_POINTS, seed: int = 0) -> di
     (n_guide points, camera frame). n_guide=0 skips the guidance points."""
     from .dataset import frame_tensors, scene_crops
 
-    d = frame_tensors(frames, n_scene=0)
+    dev = next(net.parameters()).device
+    d = {k: v.to(dev) for k, v in frame_tensors(frames, n_scene=0).items()}
     c_kp = net.keypoints(d["kp"])
     pelvis, betas, pose_reg = net.regress(c_kp)
     d.update(c_kp=c_kp, pelvis_hat=pelvis, betas_hat=betas, pose_reg=pose_reg)
-    d["scene_cond"] = scene_crops(frames, pelvis, net.config.scene_points, net.config.scene_size, seed)
+    d["scene_cond"] = scene_crops(frames, pelvis, net.config.scene_points, net.config.scene_size, seed).to(dev)
     if n_guide:
-        d["guide_points"] = scene_crops(frames, pelvis, n_guide, GUIDE_CUBE, seed + 7919) + pelvis[:, None]
+        d["guide_points"] = scene_crops(frames, pelvis, n_guide, GUIDE_CUBE, seed + 7919).to(dev) + pelvis[:, None]
     return d
 
 
@@ -69,7 +70,7 @@ def draw(net, body, d: dict, volume=None, opts: GuideOptions | None = None, seed
         score = CollisionScore(body, volume, d["betas_hat"], d["pelvis_hat"], d["guide_points"], opts.wrt,
                                opts.joints, opts.reduce)
         guide = Guidance(score.gradient, opts.scale, opts.steps, opts.plain_steps, opts.plain_factor)
-    x = sample(lambda xt, t: net.denoise(xt, t, cond), (len(cond), POSE_DIM), sched, gen, guide)
+    x = sample(lambda xt, t: net.denoise(xt, t, cond), (len(cond), POSE_DIM), sched, gen, guide, device=cond.device)
     return x, score
 
 
@@ -81,9 +82,9 @@ def sample_frames(net, body, frames, prep: dict, volume=None, opts: GuideOptions
     from .data import scene_mesh
 
     recs = []
-    faces = torch.as_tensor(body.faces)
+    faces = torch.as_tensor(body.faces, device=prep["kp"].device)
     for s in range(0, len(frames), batch):
-        idx = torch.arange(s, min(s + batch, len(frames)))
+        idx = torch.arange(s, min(s + batch, len(frames)), device=prep["kp"].device)
         d = _rows(prep, idx)
         t0 = time.perf_counter()
         x = draw(net, body, d, volume, opts, seed=seed + s)[0] if poses is None else poses[idx]
@@ -91,14 +92,14 @@ def sample_frames(net, body, frames, prep: dict, volume=None, opts: GuideOptions
         with torch.no_grad():
             out = pose_body(body, d["betas_hat"], x, d["pelvis_hat"])
             err = frame_errors(out.joints[:, :24], d["joints"], d["visible"])
-            coll = collision_ratio(out.vertices, faces, d["guide_points"]).numpy()
+            coll = collision_ratio(out.vertices, faces, d["guide_points"]).cpu().numpy()
         meshes = [scenes[int(i)] if scenes is not None else scene_mesh(frames[int(i)]) for i in idx]
-        cont = contact(out.vertices.numpy(), meshes)
+        cont = contact(out.vertices.cpu().numpy(), meshes)
         for j, i in enumerate(idx.tolist()):
             recs.append({"frame": frames[i].name, "activity": frames[i].activity,
                          **{k: float(v[j]) for k, v in err.items()},
                          "collision_ratio": float(coll[j]), "contact": bool(cont[j]), "s_per_frame": secs,
-                         "pose": x[j].tolist()})
+                         "pose": x[j].cpu().tolist()})
     return recs
 
 
@@ -153,8 +154,9 @@ def max_batch(net, body, frame_prep: dict, volume, opts: GuideOptions, budget_mb
         malloc_trim()
         with Meter(device) as m:
             cond = net.condition(d["c_kp"], d["scene_cond"], d["pelvis_hat"])
-            xt = torch.randn(b, POSE_DIM)
-            tt = torch.zeros(b, dtype=torch.long)
+            dev = d["c_kp"].device
+            xt = torch.randn(b, POSE_DIM, device=dev)
+            tt = torch.zeros(b, dtype=torch.long, device=dev)
             with torch.no_grad():
                 x0 = net.denoise(xt, tt, cond)
             if volume is not None and opts.scale:

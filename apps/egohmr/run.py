@@ -22,13 +22,16 @@ TUNE_MPJPE_SLACK_MM = 2.0
 
 def _setup(args, split: str):
     import volsmpl
+    from volsmpl.devices import check_device
 
     from .data import make_frames, scene_mesh
     from .evaluate import prepare
     from .train import load_model
 
-    body = volsmpl.create_body()
+    dev = check_device(args.device)
+    body = volsmpl.create_body().to(dev)
     net, meta = load_model(args.checkpoint, body)
+    net.to(dev)
     frames = make_frames(split, args.frames, seed=args.seed)
     if not frames:
         raise ValueError(f"the {split} split has no frames")
@@ -39,10 +42,10 @@ def _setup(args, split: str):
     return body, net, meta, frames, prep, scenes
 
 
-def _volume(guide: str):
+def _volume(guide: str, device="cpu"):
     import volsmpl
 
-    return None if guide == "none" else volsmpl.attach_volume(volsmpl.create_body(), model=guide)
+    return None if guide == "none" else volsmpl.attach_volume(volsmpl.create_body(), model=guide).to(device)
 
 
 def run_sample(args) -> int:
@@ -70,15 +73,15 @@ def run_sample(args) -> int:
           f"{reg['mpjpe_invisible_mm']:.1f})  collision {reg['collision_ratio']:.4f}")
     for g in guides:
         opts = options_of(args, scales[g])
-        vol = _volume(g)
-        with Meter("cpu") as m:
+        vol = _volume(g, args.device)
+        with Meter(args.device) as m:
             recs = sample_frames(net, body, frames, prep, vol, opts, batch=args.batch, seed=args.seed, scenes=scenes)
         s = summarize(recs)
         s["peak_mem_mb"] = m.peak_bytes / 2**20
         s["batch"] = args.batch
         if not args.no_max_batch:
             one = {k: v[:1] for k, v in prep.items()}
-            mb = max_batch(net, body, one, vol, opts, args.budget_mb)
+            mb = max_batch(net, body, one, vol, opts, args.budget_mb, device=args.device)
             s["max_batch"] = mb["max_batch"]
             batches[g] = mb
         summary[g], options[g] = s, asdict(opts)
@@ -99,21 +102,24 @@ def run_sample(args) -> int:
             result["tuning"] = json.loads(Path(args.tuned).read_text())
         write_atomic(out / "results.json", json.dumps(result, indent=1))
     # figures: the first frames, every guide's sample with the scene points inside it
-    faces = torch.as_tensor(body.faces)
+    faces = torch.as_tensor(body.faces, device=prep["kp"].device)
     figs = {}
     for i, f in enumerate(frames[: args.render]):
         with torch.no_grad():
-            gt = body(betas=torch.as_tensor(f.betas)[None], global_orient=torch.as_tensor(f.global_orient)[None],
-                      body_pose=torch.as_tensor(f.body_pose)[None], transl=torch.as_tensor(f.transl)[None]).vertices[0]
+            dev = faces.device
+            gt = body(betas=torch.as_tensor(f.betas, device=dev)[None],
+                      global_orient=torch.as_tensor(f.global_orient, device=dev)[None],
+                      body_pose=torch.as_tensor(f.body_pose, device=dev)[None],
+                      transl=torch.as_tensor(f.transl, device=dev)[None]).vertices[0]
             samples, inside = {}, {}
             for g in guides:
-                x = torch.tensor(records[g][i]["_pose"])[None]
+                x = torch.tensor(records[g][i]["_pose"], device=dev)[None]
                 v = pose_body(body, prep["betas_hat"][i:i + 1], x, prep["pelvis_hat"][i:i + 1]).vertices
                 pts = prep["guide_points"][i]
-                inside[g] = pts[winding_numbers(v[0], faces, pts) > 0.5].numpy()  # the collision metric's test
-                samples[g] = v[0].numpy()
+                inside[g] = pts[winding_numbers(v[0], faces, pts) > 0.5].cpu().numpy()  # the metric's test
+                samples[g] = v[0].cpu().numpy()
         name = f"frame_{f.name}.png"
-        frame_figure(out / name, f, scenes[i], gt.numpy(), samples, body.faces, inside)
+        frame_figure(out / name, f, scenes[i], gt.cpu().numpy(), samples, body.faces, inside)
         figs[f.name] = name
     result["figures"] = figs
     for v in result["cases"].values():
@@ -145,11 +151,12 @@ def run_tune(args) -> int:
     path = check_writable(args.out or "docs/egohmr/tune.json", "file", "--out")
     body, net, meta, frames, prep, scenes = _setup(args, split)
     base = summarize(sample_frames(net, body, frames, prep, None, None, args.batch, args.seed, scenes))
+    print(f"{len(frames)} {split} frames; unguided first")
     rows = [{"guide": "none", "scale": 0.0, **base}]
     print(f"none     MPJPE {base['mpjpe_mm']:.1f}  collision {base['collision_ratio']:.4f}")
     best = {}
     for g in guides:
-        vol = _volume(g)
+        vol = _volume(g, args.device)
         cands = []
         for f in factors:
             a = PAPER_SCALE[g] * f
@@ -206,29 +213,34 @@ def run_user_frame(args) -> int:
     out = check_writable(args.out or "out/egohmr_user", "dir", "--out")
     frame = load_user_frame(args.frame)
     scan = camera_points(frame, read_scan(args.scene, args.units, n_surface=1_000_000, seed=args.seed))
-    body = volsmpl.create_body()
+    from volsmpl.devices import check_device
+
+    dev = check_device(args.device)
+    body = volsmpl.create_body().to(dev)
     net, meta = load_model(args.checkpoint, body)
+    net.to(dev)
     with torch.no_grad():
-        c_kp = net.keypoints(torch.as_tensor(keypoint_input(frame))[None])
+        c_kp = net.keypoints(torch.as_tensor(keypoint_input(frame), device=dev)[None])
         pelvis, betas, pose_reg = net.regress(c_kp)
-    centre = pelvis[0].numpy().astype(np.float64)
+    centre = pelvis[0].cpu().numpy().astype(np.float64)
     cond_pts = _user_crop(scan, centre, net.config.scene_points, args.seed) - centre
     guide_pts = _user_crop(scan, centre, GUIDE_POINTS, args.seed + 7919)
     d = {"c_kp": c_kp, "pelvis_hat": pelvis, "betas_hat": betas,
-         "scene_cond": torch.as_tensor(cond_pts, dtype=torch.float32)[None],
-         "guide_points": torch.as_tensor(guide_pts, dtype=torch.float32)[None]}
+         "scene_cond": torch.as_tensor(cond_pts, dtype=torch.float32, device=dev)[None],
+         "guide_points": torch.as_tensor(guide_pts, dtype=torch.float32, device=dev)[None]}
     tree = cKDTree(guide_pts)
-    faces = torch.as_tensor(body.faces)
+    faces = torch.as_tensor(body.faces, device=dev)
     summary, panels = {}, []
     cam = camera_of(frame.K, frame.image_size)
     for g in guides:
-        vol = _volume(g)
+        vol = _volume(g, dev)
         t0 = time.perf_counter()
         x, _ = draw(net, body, d, vol, options_of(args, scales[g]), seed=args.seed)
         secs = time.perf_counter() - t0
         with torch.no_grad():
             v = pose_body(body, betas, x, pelvis).vertices[0]
-        inside = (winding_numbers(v, faces, d["guide_points"][0]) > 0.5).numpy()
+        inside = (winding_numbers(v, faces, d["guide_points"][0]) > 0.5).cpu().numpy()
+        v = v.cpu()
         near = tree.query(v.numpy(), k=1)[0]
         summary[g] = {"n_frames": 1, "collision_ratio": float(inside.mean()),
                       "contact_pct": 100.0 * float((near <= 0.02).any() or inside.any()), "s_per_frame": secs,

@@ -42,6 +42,7 @@ class TrainSettings:
     save_every: int = 500
     seed: int = 0
     threads: int | None = None
+    device: str = "cpu"
 
     def check(self) -> None:
         for name in ("steps", "batch", "save_every"):
@@ -69,10 +70,11 @@ def losses(net: EgoNet, body, d: dict, sched: Schedule, gen: torch.Generator, s:
            "betas": 0.1 * ((betas_hat - d["betas"]) ** 2).mean(),
            "reg_pose": ((pose_reg - d["pose"]) ** 2).mean(),
            "reg_joints": s.joint_weight * joint_err(pose_reg)}
-    shift = torch.randn(B, 3, generator=gen) * s.pelvis_noise
+    dev = d["kp"].device  # random draws by the CPU generator, then moved: the same run on every device
+    shift = (torch.randn(B, 3, generator=gen) * s.pelvis_noise).to(dev)
     cond = net.condition(c_kp.detach(), d["scene"] - shift[:, None], d["pelvis"] + shift)
-    t = torch.randint(0, sched.T, (B,), generator=gen)
-    noise = torch.randn(d["pose"].shape, generator=gen)
+    t = torch.randint(0, sched.T, (B,), generator=gen).to(dev)
+    noise = torch.randn(d["pose"].shape, generator=gen).to(dev)
     x0_hat = net.denoise(sched.q_sample(d["pose"], t, noise), t, cond)
     out["diff_pose"] = ((x0_hat - d["pose"]) ** 2).mean()
     out["diff_joints"] = s.joint_weight * joint_err(x0_hat)
@@ -125,20 +127,23 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
     out = check_writable(out, "dir", "--out")
     if s.threads:
         torch.set_num_threads(s.threads)
-    body = body or volsmpl.create_body()
+    from volsmpl.devices import check_device
+
+    dev = check_device(s.device)
+    body = (body or volsmpl.create_body()).to(dev)
     torch.manual_seed(s.seed)
-    net = EgoNet(config or EgoConfig())
+    net = EgoNet(config or EgoConfig()).to(dev)
     sched = Schedule(net.config.steps)
     opt = torch.optim.Adam(net.parameters(), lr=s.lr)
     gen = torch.Generator().manual_seed(s.seed)
     step, prior_seconds = 0, 0.0
     if resume and (out / "state.pt").is_file():
         net, meta = load_model(out / "model", body)
-        net.train().requires_grad_(True)
+        net.to(dev).train().requires_grad_(True)
         opt = torch.optim.Adam(net.parameters(), lr=s.lr)
-        st = torch.load(out / "state.pt", weights_only=True)
+        st = torch.load(out / "state.pt", weights_only=True, map_location=dev)
         opt.load_state_dict(st["opt"])
-        gen.set_state(st["gen"])
+        gen.set_state(st["gen"].cpu())
         step = int(st["step"])
         prior_seconds = float(meta.get("seconds", 0.0))
         log(f"resumed {out} at step {step}")
@@ -147,7 +152,7 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
     t0 = time.time()
     train_frames = make_frames("train", n_train, seed=s.seed)
     val_frames = make_frames("val", n_val, seed=s.seed)
-    data = frame_tensors(train_frames, net.config.scene_points, net.config.scene_size)
+    data = {k: v.to(dev) for k, v in frame_tensors(train_frames, net.config.scene_points, net.config.scene_size).items()}
     with torch.no_grad():
         data["rest"] = rest_joints(body, data["betas"])
     log(f"{len(train_frames)} training frames, {len(val_frames)} validation frames ({time.time() - t0:.0f} s)")
@@ -159,7 +164,7 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
         lr = s.lr_min + 0.5 * (s.lr - s.lr_min) * (1 + math.cos(math.pi * step / s.steps))
         for g in opt.param_groups:
             g["lr"] = lr
-        idx = torch.randint(0, n, (min(s.batch, n),), generator=gen)
+        idx = torch.randint(0, n, (min(s.batch, n),), generator=gen).to(dev)
         terms = losses(net, body, {k: v[idx] for k, v in data.items()}, sched, gen, s)
         loss = sum(terms.values())
         if not torch.isfinite(loss):
