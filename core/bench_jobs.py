@@ -27,6 +27,13 @@ job['return_pred'] the job also saves its first output tensor and run_job return
 on the CPU) of the vertices of one posed body w.r.t. a second posed body that overlaps it
 (`bodybody_inputs`): memory like volume_job, median time over repeats, the winding numbers as 'pred'.
 
+  - per body: t_body_ms = t_ms / B and t_query_body_ms = t_query_ms / B (the batching gain, or loss).
+  - `profile_query` (torch.profiler, CPU or CUDA): ops_per_query, the operator calls of one query on a cached
+    encoding (top-level aten operators: an operator's own inner calls are not counted again), and
+    t_decoder_ms, the time inside the volume's decoder scope (`volume.DECODER_SCOPE`), median of up to 3
+    profiled queries; decoder_gflops = decoder FLOPs / t_decoder_ms is the decoder's own rate (report it beside
+    the same run's fp32 matmul rate).
+
 `matmul_rate` measures the machine's fp32 matmul rate in this process.
 """
 from __future__ import annotations
@@ -42,7 +49,7 @@ import torch
 from .meter import Meter, peak_memory, run_isolated, timed_ms
 
 __all__ = ["make_frames", "bodybody_inputs", "run_job", "volume_job", "winding_job", "build_volume",
-           "memory_first_and_steady", "fit_budget", "flops_per_pair", "derived", "matmul_rate"]
+           "memory_first_and_steady", "fit_budget", "flops_per_pair", "derived", "matmul_rate", "profile_query"]
 
 
 # ---------------------------------------------------------------------------------------------- inputs
@@ -125,15 +132,59 @@ def flops_per_pair(net) -> Optional[int]:
 
 
 def derived(r: dict) -> dict:
-    """Per-point decoder evaluations, decoder GFLOP per query and achieved GFLOP/s of a volume_job result."""
+    """Per-point decoder evaluations, decoder GFLOP per query, achieved GFLOP/s (over the whole query and, when
+    profiled, over the decoder alone) and per-body times of a volume_job result."""
     pairs, fpp = r.get("decoder_pairs"), r.get("flops_per_pair")
-    out = {"evals_per_point": None, "decoder_gflop": None, "gflops": None}
+    out = {"evals_per_point": None, "decoder_gflop": None, "gflops": None, "decoder_gflops": None,
+           "t_body_ms": r["t_ms"] / r["batch"], "t_query_body_ms": r["t_query_ms"] / r["batch"]}
     if pairs is not None:
         out["evals_per_point"] = pairs / (r["batch"] * r["points"])
         if fpp:
             out["decoder_gflop"] = pairs * fpp / 1e9
             out["gflops"] = out["decoder_gflop"] / (r["t_query_ms"] / 1e3) if r["t_query_ms"] > 0 else None
+            t_dec = r.get("t_decoder_ms")
+            out["decoder_gflops"] = out["decoder_gflop"] / (t_dec / 1e3) if t_dec else None
     return out
+
+
+def profile_query(query, runs: int = 3) -> dict:
+    """Operator calls of one call of `query` and the time spent in the decoder scope (volume.DECODER_SCOPE).
+
+    Shape: query() -> anything. Returns {'ops_per_query': int (top-level aten operator calls of one call),
+    'op_names': {name: calls}, 't_decoder_ms': median decoder-scope time over `runs` profiled calls (None when
+    the query never enters the scope)}."""
+    from torch.profiler import ProfilerActivity, profile
+
+    from .volume import DECODER_SCOPE
+
+    if runs < 1:
+        raise ValueError(f"profile_query needs runs >= 1, got {runs}")
+    counts, dec = [], []
+    names: dict = {}
+    for _ in range(runs):
+        with profile(activities=[ProfilerActivity.CPU]) as prof:
+            query()
+        events = prof.events()
+        top = [e for e in events if e.name.startswith("aten::") and _outside_aten(e)]
+        counts.append(len(top))
+        if not names:
+            for e in top:
+                names[e.name] = names.get(e.name, 0) + 1
+        scoped = [e.cpu_time_total / 1e3 for e in events if e.name == DECODER_SCOPE]
+        if scoped:
+            dec.append(sum(scoped))
+    return {"ops_per_query": int(np.median(counts)), "op_names": dict(sorted(names.items(), key=lambda kv: -kv[1])),
+            "t_decoder_ms": float(np.median(dec)) if dec else None}
+
+
+def _outside_aten(event) -> bool:
+    """True when no enclosing profiler event of `event` is an aten operator (a top-level operator call)."""
+    parent = event.cpu_parent
+    while parent is not None:
+        if parent.name.startswith("aten::"):
+            return False
+        parent = parent.cpu_parent
+    return True
 
 
 def build_volume(body, spec: dict):
@@ -197,6 +248,7 @@ def volume_job(job: dict) -> dict:
         evals0 = vol.decoder_evaluations if counts else 0
         t_query = timed_ms([query] * rep, device)
         pairs = (vol.decoder_evaluations - evals0) // rep if counts else None
+        res.update(profile_query(query, min(3, rep)))
     if job.get("return_pred"):
         torch.save(pred["v"].cpu(), job["pred_path"])
     res.update(t_ms=float(np.median(t_full)), t_query_ms=float(np.median(t_query)), t_ms_all=t_full,

@@ -93,7 +93,9 @@ def _acc_cells(acc: Optional[dict]) -> List[str]:
 def model_rows(result: dict) -> Tuple[List[str], List[List[str]]]:
     """Header and rows of the per-model table."""
     head = ["model", "B", "t [ms]", "t query [ms]", "runs", "peak mem", "mem query", "params", "dec. evals/pt", "decoder GFLOP",
-            "GFLOP/s", "IoU mean [%]", "MSE SDF"]
+            "GFLOP/s", "IoU mean [%]", "MSE SDF", "t/body [ms]", "t query/body [ms]", "ops/query", "decoder GFLOP/s",
+            "decoder / matmul"]
+    mm = (result.get("matmul") or {}).get("gflops")
     rows = []
     for name, e in result["models"].items():
         if e["status"] != "ok":
@@ -109,7 +111,10 @@ def model_rows(result: dict) -> Tuple[List[str], List[List[str]]]:
             rows.append([name, batch, _f(r["t_ms"], "{:.1f}"), _f(r["t_query_ms"], "{:.1f}"),
                          str(r.get("repeats_used", len(r["t_ms_all"]))), _mem(r["mem_bytes"]),
                          _mem(r.get("mem_query_bytes")), f"{r['params'] / 1e6:.2f} M", _f(r["evals_per_point"], "{:.2f}"), _f(r["decoder_gflop"], "{:.2f}"),
-                         _f(r["gflops"], "{:.1f}")] + _acc_cells(acc))
+                         _f(r["gflops"], "{:.1f}")] + _acc_cells(acc)
+                        + [_f(r.get("t_body_ms"), "{:.1f}"), _f(r.get("t_query_body_ms"), "{:.1f}"),
+                           _f(r.get("ops_per_query"), "{:d}"), _f(r.get("decoder_gflops"), "{:.1f}"),
+                           _f(_ratio(r.get("decoder_gflops"), mm), "{:.0%}")])
     return head, rows
 
 
@@ -192,7 +197,9 @@ def to_markdown(result: dict) -> str:
             "t: fresh encoding of a new pose + query; t query: query on a cached encoding; peak mem: "
             + ("CUDA max allocated" if str(c["device"]).startswith("cuda") else "peak RSS increase of the process")
             + " during encoding + query (mem query: query on a cached encoding); dec. evals/pt: part decoders evaluated per query point; decoder GFLOP: pairs x FLOPs per decoder "
-            "evaluation; GFLOP/s: decoder GFLOP / t query; runs: timed runs (fewer than asked when over the time budget).", "", "## Ratios (same run) beside the paper's (GPU)", "",
+            "evaluation; GFLOP/s: decoder GFLOP / t query; runs: timed runs (fewer than asked when over the time budget); "
+            "t/body: t / B; ops/query: top-level operator calls of one query (torch.profiler); decoder GFLOP/s: decoder "
+            "GFLOP / the time inside the decoder (profiled); decoder / matmul: that rate over the same run's fp32 matmul rate.", "", "## Ratios (same run) beside the paper's (GPU)", "",
             markdown_table(*ratio_rows(result))]
     if result.get("bodybody"):
         out += ["", "## Body-body occupancy check (paper Table C.4)", "", markdown_table(*bodybody_rows(result))]

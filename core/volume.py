@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
+from torch.profiler import record_function
 
 from .boxes import inside_boxes
 from .models import kind_of_network
@@ -32,6 +33,8 @@ from .tensor_fingerprint import fingerprint, module_fingerprint
 from .validate import check_points
 from .volume_api import BodyVolume, check_output
 
+#: profiler scope of the decoder evaluations of a query (volsmpl bench times the decoder alone by it)
+DECODER_SCOPE = "volsmpl::decoder"
 
 
 @dataclass
@@ -260,11 +263,12 @@ class Volume(BodyVolume):
                 return outside, inside
             self.decoder_evaluations += xs.shape[0] * xs.shape[1] * xs.shape[2]
             extra = {} if self.is_sdf else {"inside": ins}
-            if norm:
-                c, sc = enc.center[:, kk, None], enc.scale[:, kk, None]
-                vals = self.net.decode_dense((xs - c) / sc, enc.code, **extra) * sc[..., 0]
-            else:
-                vals = self.net.decode_dense(xs, enc.code, **extra)
+            with record_function(DECODER_SCOPE):
+                if norm:
+                    c, sc = enc.center[:, kk, None], enc.scale[:, kk, None]
+                    vals = self.net.decode_dense((xs - c) / sc, enc.code, **extra) * sc[..., 0]
+                else:
+                    vals = self.net.decode_dense(xs, enc.code, **extra)
             vals = torch.where(ins, vals, outside[:, kk])
             return (vals if enc.parts is None else outside.index_copy(1, enc.parts, vals)), inside
         b, k, n = inside.nonzero(as_tuple=True)
@@ -274,9 +278,13 @@ class Volume(BodyVolume):
         kc = k if enc.slot is None else enc.slot[k]  # index into the code's part axis
         if norm:
             sc = enc.scale[b, k]
-            vals = self.net.decode_pairs((x_local[b, k, n] - enc.center[b, k]) / sc, b, kc, enc.code) * sc[:, 0]
+            xin = (x_local[b, k, n] - enc.center[b, k]) / sc
         else:
-            vals = self.net.decode_pairs(x_local[b, k, n], b, kc, enc.code)
+            xin = x_local[b, k, n]
+        with record_function(DECODER_SCOPE):
+            vals = self.net.decode_pairs(xin, b, kc, enc.code)
+        if norm:
+            vals = vals * sc[:, 0]
         return outside.index_put((b, k, n), vals), inside
 
     def _chunks(self, B: int, N: int):

@@ -58,6 +58,25 @@ def test_decoder_work_is_consistent(tiny_run):
     assert sparse["decoder_gflop"] == pytest.approx(sparse["decoder_pairs"] * sparse["flops_per_pair"] / 1e9)
 
 
+def test_operator_counts_and_decoder_rate(tiny_run):
+    res, md = tiny_run
+    for name in ("volsmpl", "volsmpl-dense"):
+        r = res["models"][name]["batches"]["1"]
+        assert r["ops_per_query"] > 0 and sum(r["op_names"].values()) == r["ops_per_query"]
+        assert r["t_decoder_ms"] > 0 and r["t_decoder_ms"] <= r["t_query_ms"] * 10  # profiled: loose, never timed
+        assert r["decoder_gflops"] == pytest.approx(r["decoder_gflop"] / (r["t_decoder_ms"] / 1e3))
+        assert r["t_body_ms"] == pytest.approx(r["t_ms"]) and r["t_query_body_ms"] == pytest.approx(r["t_query_ms"])
+    assert "ops/query" in md and "decoder / matmul" in md
+
+
+def test_profile_query_counts_top_level_operators():
+    import torch
+    from volsmpl.bench_jobs import profile_query
+    a = torch.randn(8, 8)
+    r = profile_query(lambda: (a @ a).relu(), runs=1)  # matmul's inner mm is not counted again
+    assert r["op_names"] == {"aten::matmul": 1, "aten::relu": 1} and r["t_decoder_ms"] is None
+
+
 def test_ratios_and_bodybody(tiny_run):
     res, _ = tiny_run
     r = res["ratios"]["volsmpl-dense/volsmpl"]["1"]
