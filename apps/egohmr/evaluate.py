@@ -140,7 +140,7 @@ def regressor_and_sample_errors(net, body, frames, seed: int = 0) -> dict:
 
 
 def max_batch(net, body, frame_prep: dict, volume, opts: GuideOptions, budget_mb: float, device="cpu",
-              cap: int = 64) -> dict:
+              cap: int = 128) -> dict:
     """The largest batch whose guided sampling step (denoiser + collision gradient) stays within `budget_mb`
     of peak memory, measured (volsmpl.meter) by doubling from 1 up to `cap`, then bisecting. frame_prep: one
     prepared frame (batch of 1) replicated. Returns {'max_batch', 'measured': {batch: peak MB}}."""

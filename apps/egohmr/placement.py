@@ -394,11 +394,16 @@ def _sitting(ctx: _Ctx, rng) -> Placement | None:
     return ctx.finish("sitting", G, body_pose, TR, p - [0.0, s, 0.0], item.mesh, floor=False)
 
 
+def _pick(ctx: _Ctx, rng, category: str):
+    """One of the room's items of `category`, drawn by rng; None when the room has none (rng not drawn then)."""
+    items = [it for it in ctx.room.items if it.category == category]
+    return items[rng.integers(len(items))] if items else None
+
+
 def _lying(ctx: _Ctx, rng) -> Placement | None:
-    beds = [it for it in ctx.room.items if it.category == "bed"]
-    if not beds:
+    item = _pick(ctx, rng, "bed")
+    if item is None:
         return None
-    item = beds[rng.integers(len(beds))]
     tmpl, TR, Tt = item.template, item.transform[:3, :3], item.transform[:3, 3]
     G = Rotation.from_euler("x", -90, degrees=True).as_matrix()  # supine, head towards the headboard (-Z)
     e = set_joints(named_euler("arms_down"), left_shoulder=(0, 0, -1.15), right_shoulder=(0, 0, 1.15))
@@ -446,10 +451,9 @@ def _leaning_wall(ctx: _Ctx, rng) -> Placement | None:
 
 
 def _leaning_table(ctx: _Ctx, rng) -> Placement | None:
-    tables = [it for it in ctx.room.items if it.category == "table"]
-    if not tables:
+    item = _pick(ctx, rng, "table")
+    if item is None:
         return None
-    item = tables[rng.integers(len(tables))]
     c, A, h = item.footprint()
     a = int(rng.random() < h[1] / (h[0] + h[1]))  # sides by length: the long sides more often
     n2 = A[a] * (1.0 if rng.random() < 0.5 else -1.0)
@@ -486,10 +490,9 @@ def _leaning_table(ctx: _Ctx, rng) -> Placement | None:
 
 
 def _reaching_shelf(ctx: _Ctx, rng) -> Placement | None:
-    shelves = [it for it in ctx.room.items if it.category == "shelf"]
-    if not shelves:
+    item = _pick(ctx, rng, "shelf")
+    if item is None:
         return None
-    item = shelves[rng.integers(len(shelves))]
     tmpl, TR, Tt = item.template, item.transform[:3, :3], item.transform[:3, 3]
     lo, hi = tmpl.mesh.bounds
     boards = [s["height"] for s in tmpl.supports() if 0.5 <= s["height"] + Tt[1] <= 1.7]

@@ -78,7 +78,7 @@ def run_sample(args) -> int:
             recs = sample_frames(net, body, frames, prep, vol, opts, batch=args.batch, seed=args.seed, scenes=scenes)
         s = summarize(recs)
         s["peak_mem_mb"] = m.peak_bytes / 2**20
-        s["batch"] = args.batch
+        s["sample_batch"] = args.batch
         if not args.no_max_batch:
             one = {k: v[:1] for k, v in prep.items()}
             mb = max_batch(net, body, one, vol, opts, args.budget_mb, device=args.device)
