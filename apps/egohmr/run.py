@@ -50,7 +50,6 @@ def _volume(guide: str, device="cpu"):
 
 def run_sample(args) -> int:
     from volsmpl import paper
-    from volsmpl.meter import Meter
     from volsmpl.outputs import check_writable, write_atomic
     from volsmpl.provenance import machine_info
 
@@ -74,15 +73,13 @@ def run_sample(args) -> int:
     for g in guides:
         opts = options_of(args, scales[g])
         vol = _volume(g, args.device)
-        with Meter(args.device) as m:
-            recs = sample_frames(net, body, frames, prep, vol, opts, batch=args.batch, seed=args.seed, scenes=scenes)
+        recs = sample_frames(net, body, frames, prep, vol, opts, batch=args.batch, seed=args.seed, scenes=scenes)
         s = summarize(recs)
-        s["peak_mem_mb"] = m.peak_bytes / 2**20
         s["sample_batch"] = args.batch
-        if not args.no_max_batch:
+        if not args.no_max_batch:  # peak memory of one guided step, measured alone (no polling during the run)
             one = {k: v[:1] for k, v in prep.items()}
-            mb = max_batch(net, body, one, vol, opts, args.budget_mb, device=args.device)
-            s["max_batch"] = mb["max_batch"]
+            mb = max_batch(net, body, one, vol, opts, args.budget_mb, device=args.device, also=(args.batch,))
+            s["max_batch"], s["peak_mem_mb"] = mb["max_batch"], mb["measured_mb"][str(args.batch)]
             batches[g] = mb
         summary[g], options[g] = s, asdict(opts)
         records[g] = [{k: v for k, v in r.items() if k != "pose"} for r in recs]
