@@ -9,7 +9,8 @@ This module holds the settings (`BenchConfig`), the run (`run_bench`) and the CL
 in a fresh Python process, are in `volsmpl.bench_jobs`, the ratios and tables in `volsmpl.bench_report`.
 The result JSON records where and when it ran under 'meta' (`volsmpl.provenance.machine_info`).
 
-Models (`MODELS`): 'volsmpl' (sparse engine: decoders only on (point, part) pairs inside part boxes),
+Models (`MODELS`): 'volsmpl' (sparse engine: decoders only on (point, part) pairs inside part boxes, lean
+query path), 'volsmpl-chunked' (the same on the engine before issue 28: `Volume.engine`, `ENGINES`),
 'volsmpl-dense' (the reference path: every part decoder on every point), 'coap' (COAP as published: every part
 on every point, i.e. dense) and 'coap-sparse' (COAP's network on the sparse engine). A model whose
 `attach_volume(body, model=...)` is not available is skipped with a note.
@@ -47,7 +48,7 @@ from .bench_jobs import bodybody_inputs, make_frames, matmul_rate, run_job
 from .bench_report import PAPER, caveats, compute_ratios, format_report, to_markdown
 from .provenance import machine_info
 
-__all__ = ["MODELS", "BenchConfig", "model_available", "checkpoint_for", "bench_model", "bench_bodybody",
+__all__ = ["MODELS", "ENGINES", "BenchConfig", "model_available", "checkpoint_for", "bench_model", "bench_bodybody",
            "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
            "add_parser", "config_from_args", "run", "PAPER", "compute_ratios", "format_report", "to_markdown"]
 
@@ -57,7 +58,11 @@ MODELS: Dict[str, Tuple[str, bool]] = {
     "volsmpl-dense": ("volsmpl", True),  # the paper's implementation: every part on every point, one pass
     "coap": ("coap", True),          # COAP as published evaluates every part on every point, in one pass
     "coap-sparse": ("coap", False),  # COAP's network on our sparse engine
+    "volsmpl-chunked": ("volsmpl", False),  # the sparse engine before issue 28: padded chunks, dense box distances
 }
+
+#: benchmark model name -> Volume.engine of its sparse path (default 'lean')
+ENGINES: Dict[str, str] = {"volsmpl-chunked": "chunked"}
 
 
 @dataclass
@@ -176,7 +181,8 @@ def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optio
     model, dense = MODELS[name]
     n_frames = max(1, cfg.warmup + cfg.repeats)
     inputs = make_frames(body, batch, cfg.n_points, n_frames, cfg.seed)
-    job = {"spec": {"model": model, "dense": dense, "checkpoint": checkpoint, "init_seed": cfg.init_seed},
+    job = {"spec": {"model": model, "dense": dense, "checkpoint": checkpoint, "init_seed": cfg.init_seed,
+                    "engine": ENGINES.get(name, "lean")},
            "device": cfg.device, "threads": cfg.threads or torch.get_num_threads(), "warmup": cfg.warmup,
            "repeats": cfg.repeats, "budget_s": cfg.budget_s}
     r = run_job("volsmpl.bench_jobs:volume_job", job, inputs, cfg.timeout_s)

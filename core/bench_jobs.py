@@ -188,7 +188,8 @@ def _outside_aten(event) -> bool:
 
 
 def build_volume(body, spec: dict):
-    """The volume a job measures: spec {'model', 'dense', 'checkpoint' (or None: random init), 'init_seed'}."""
+    """The volume a job measures: spec {'model', 'dense', 'checkpoint' (or None: random init), 'init_seed',
+    optional 'engine' (Volume.engine, default 'lean')}."""
     from .attach import attach_volume
 
     if spec.get("checkpoint"):
@@ -196,6 +197,7 @@ def build_volume(body, spec: dict):
     else:
         torch.manual_seed(int(spec.get("init_seed", 0)))
         vol = attach_volume(body, model=spec["model"], pretrained=False, dense=spec["dense"])
+    vol.engine = spec.get("engine", "lean")
     if spec["dense"]:
         # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
         # no cache tiling

@@ -23,7 +23,8 @@ __all__ = ["PAPER", "RATIO_PAIRS", "compute_ratios", "caveats", "model_rows", "r
 PAPER = paper.bench_paper()
 
 #: (numerator, denominator) model pairs whose time and memory ratios are reported per batch size
-RATIO_PAIRS = [("coap", "volsmpl"), ("coap-sparse", "volsmpl"), ("volsmpl-dense", "volsmpl"), ("coap", "coap-sparse")]
+RATIO_PAIRS = [("coap", "volsmpl"), ("coap-sparse", "volsmpl"), ("volsmpl-dense", "volsmpl"), ("coap", "coap-sparse"),
+               ("volsmpl-chunked", "volsmpl")]
 
 
 # ---------------------------------------------------------------------------------------------- ratios

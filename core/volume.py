@@ -56,6 +56,7 @@ class Encoding:
     scale: torch.Tensor | None = None
     parts: torch.Tensor | None = None
     slot: torch.Tensor | None = None
+    grouped: tuple | None = None  # the code's per-group layer matrices (grouped engine), made on first use
 
     def encoded(self, num_parts: int) -> torch.Tensor:
         """(K,) bool: which parts have a code."""
@@ -78,17 +79,39 @@ class Volume(BodyVolume):
         net: the network (VolumetricSMPLNet, or CoapNet for the occupancy baseline).
         dense: evaluate every part decoder on every point (reference path) instead of only the
             (point, part) pairs inside part boxes (default, same values and gradients).
-        chunk_elems: memory budget of one query chunk in (body, part, point) entries.
+        chunk_elems: memory budget of one query chunk in (body, part, point) entries (`query` on the grouped
+            engine holds ~4x less per entry and takes LEAN_FACTOR times as many).
+        engine: the sparse query path: 'lean' (default: `query` culls by boxes, runs the decoders on the pairs
+            inside, takes their minimum by one scatter and computes box distances only for the points in no box,
+            with one host sync) or 'chunked' (the engine before issue 28: every part's box distance at every
+            point, then the minimum over a dense (B, K, N) array).
+        pair_decoder: how the pairs are decoded: 'tiles' (default: pairs sorted by (body, part) group and cut
+            into equal chunks, only each group's last chunk padded (~9 % of the rows on the benchmark's points),
+            one batched matmul per layer per cache tile of 8,192 rows: NBWDecoder.decode_pairs) or 'grouped'
+            (one grouped matmul per layer over all pairs, no padding, no tiles: the operator count does not
+            depend on B or on the pairs, volsmpl.nn.grouped; on this 2-core CPU 1.3-2.5x slower than 'tiles', as
+            its activations leave the cache). 'grouped' falls back to 'tiles' where the network or dtype has no
+            grouped matmul (COAP, float64, float32 on CUDA).
     """
 
+    ENGINES = ("lean", "chunked")
+    PAIR_DECODERS = ("tiles", "grouped")
+    LEAN_FACTOR = 4
+
     def __init__(self, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
-                 dense: bool = False, chunk_elems: int = 1 << 21):
+                 dense: bool = False, chunk_elems: int = 1 << 21, engine: str = "lean", pair_decoder: str = "tiles"):
         super().__init__()
         self.net = net
         self.partition = partition
         self.fingerprint = fingerprint
         self.dense = dense
         self.chunk_elems = int(chunk_elems)
+        if engine not in self.ENGINES:
+            raise ValueError(f"engine must be one of {self.ENGINES}, got {engine!r}")
+        if pair_decoder not in self.PAIR_DECODERS:
+            raise ValueError(f"pair_decoder must be one of {self.PAIR_DECODERS}, got {pair_decoder!r}")
+        self.engine = engine
+        self.pair_decoder = pair_decoder
         self._last: Encoding | None = None
         self.decoder_evaluations = 0  # (point, part) decoder evaluations so far, for tests and benchmarks
         self.kind = kind_of_network(net)  # the registry's name of this model ('volsmpl', 'coap')
@@ -275,20 +298,101 @@ class Volume(BodyVolume):
         self.decoder_evaluations += b.numel()
         if b.numel() == 0:
             return outside, inside
+        return outside.index_put((b, k, n), self._decode(enc, x_local, b, k, n)), inside
+
+    def _grouped_ok(self, x: torch.Tensor) -> bool:
+        """Whether the pairs x (M, 3) are decoded by grouped matmuls (pair_decoder, network, dtype and device)."""
+        return (self.pair_decoder == "grouped" and hasattr(self.net, "decode_grouped")
+                and self.net.grouped_supported(x.dtype, x.device))
+
+    def _decode(self, enc: Encoding, x_local: torch.Tensor, b, k, n) -> torch.Tensor:
+        """Decoder values of the pairs (b, k, n) (each (M,) int64) of x_local (B, K, N, 3) -> (M,), normalised
+        models scaled back to metres."""
         kc = k if enc.slot is None else enc.slot[k]  # index into the code's part axis
+        norm = enc.scale is not None
         if norm:
             sc = enc.scale[b, k]
             xin = (x_local[b, k, n] - enc.center[b, k]) / sc
         else:
             xin = x_local[b, k, n]
         with record_function(DECODER_SCOPE):
-            vals = self.net.decode_pairs(xin, b, kc, enc.code)
-        if norm:
-            vals = vals * sc[:, 0]
-        return outside.index_put((b, k, n), vals), inside
+            vals = self._decode_xin(enc, xin, b, kc)
+        return vals * sc[:, 0] if norm else vals
 
-    def _chunks(self, B: int, N: int):
-        step = max(1024, self.chunk_elems // max(1, B * self.num_parts))
+    def _decode_xin(self, enc: Encoding, xin: torch.Tensor, b: torch.Tensor, kc: torch.Tensor) -> torch.Tensor:
+        """Decoder inputs xin (M, 3) of pairs of body b (M,) and code part kc (M,) -> (M,), by pair_decoder."""
+        if not self._grouped_ok(xin):
+            return self.net.decode_pairs(xin, b, kc, enc.code)
+        if enc.grouped is None or (torch.is_grad_enabled() and enc.code.z.requires_grad
+                                   and not enc.grouped[0].requires_grad):  # made without a graph: remake
+            enc.grouped = self.net.grouped_matrices(enc.code)
+        Bc, Kc = enc.code.z.shape[:2]
+        group = b * Kc + kc
+        order = torch.argsort(group, stable=True)  # no-op order when the pairs come sorted by (body, part)
+        offs = torch.cumsum(torch.bincount(group, minlength=Bc * Kc), 0).to(torch.int32)
+        vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped)
+        return torch.empty_like(vals).index_put_((order,), vals)
+
+    def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0) -> torch.Tensor:
+        """`query` values of an SDF model on the lean sparse path, for bodies b0 .. b0 + B of the encoding.
+        points (B, N, 3) -> (B, N).
+
+        One batched matmul takes every point into every part's box-centred frame, u = x_k - c_k (B, N, K, 3:
+        each point's K parts contiguous); a point is in box k when |u| <= half-extent on every axis. Points in
+        some encoded part's box get the minimum over those parts' decoders (one scatter-min); the others the
+        minimum over parts of the box distance, computed for them only. One host sync (the two counts), then
+        fixed-size nonzero. Same values as `_part_values` + minimum (the dense reference) up to rounding."""
+        B, N = points.shape[:2]
+        K = self.num_parts
+        G, box_min, box_max = (x[b0:b0 + B] for x in (enc.G, enc.box_min, enc.box_max))
+        R, t = G[..., :3, :3], G[..., :3, 3]                                  # (B, K, 3, 3), (B, K, 3)
+        c = 0.5 * (box_min + box_max)                                         # (B, K, 3)
+        half = 0.5 * (box_max - box_min)
+        W = R.permute(0, 2, 1, 3).reshape(B, 3, K * 3)                        # row x @ R_k = (R_k^T x)^T
+        # about the body's own origin o (mean part origin): x @ R - t @ R would cancel world-sized terms
+        o = t.mean(dim=1, keepdim=True)                                       # (B, 1, 3)
+        bias = -(torch.einsum("bki,bkij->bkj", t - o, R) + c).reshape(B, 1, K * 3)
+        u = torch.baddbmm(bias, points - o, W).view(B, N, K, 3)               # x_k - c_k
+        raw = (u.abs() <= half[:, None]).all(dim=-1)                          # (B, N, K)
+        inside = raw if enc.slot is None else raw & enc.encoded(K)
+        free = ~inside.any(dim=-1)                                            # (B, N)
+        n_pairs, n_free = torch.stack([inside.sum(), free.sum()]).tolist()   # the query's one host sync
+        b, n, k = torch.nonzero_static(inside, size=n_pairs).unbind(1)
+        bf, nf = torch.nonzero_static(free, size=n_free).unbind(1)
+        self.decoder_evaluations += n_pairs
+        res = u.new_zeros(B * N)
+        if n_pairs:
+            ub = u[b, n, k]                                                   # (M, 3)
+            if enc.scale is not None:
+                sc = enc.scale[b0:b0 + B][b, k]
+                xin = ub / sc
+            else:
+                xin = ub + c[b, k]
+            kc = k if enc.slot is None else enc.slot[k]
+            with record_function(DECODER_SCOPE):
+                vals = self._decode_xin(enc, xin, b + b0, kc)
+            if enc.scale is not None:
+                vals = vals * sc[:, 0]
+            res = res.scatter_reduce(0, b * N + n, vals, "amin", include_self=False)
+        if n_free:
+            uf = u[bf, nf]                                                    # (F, K, 3)
+            d = box_sdf(uf, -half[bf], half[bf])                              # (F, K)
+            if enc.slot is not None:  # a part without a code is absent inside its box (as in _part_values)
+                d = torch.where(raw[bf, nf], float("inf"), d)
+            res = res.index_put((bf * N + nf,), d.amin(dim=1))
+        return res.view(B, N)
+
+    def _lean_chunks(self, B: int, N: int) -> list:
+        """Chunks (b0, b1, s, e) of the lean query: whole bodies while a chunk's (body, part, point) entries stay
+        within chunk_elems (each body's work then runs as at B = 1, in cache), else point ranges of one body."""
+        per_body = self.num_parts * max(1, N)
+        if per_body <= self.chunk_elems:
+            nb = max(1, self.chunk_elems // per_body)
+            return [(b, min(B, b + nb), 0, N) for b in range(0, B, nb)]
+        return [(b, b + 1, s, e) for b in range(B) for s, e in self._chunks(1, N)]
+
+    def _chunks(self, B: int, N: int, factor: int = 1):
+        step = max(1024, factor * self.chunk_elems // max(1, B * self.num_parts))
         return [(s, min(N, s + step)) for s in range(0, N, step)]
 
     # ------------------------------------------------------------------ public queries
@@ -325,6 +429,9 @@ class Volume(BodyVolume):
         skipped); `query` ensures it."""
         dense = self.dense if dense is None else dense
         B, N = points.shape[:2]
+        if self.is_sdf and not dense and self.engine == "lean":
+            res = [self._query_lean(enc, points[b0:b1, s:e], b0) for b0, b1, s, e in self._lean_chunks(B, N)]
+            return res[0] if len(res) == 1 else _assemble(res, self._lean_chunks(B, N), B, N)
         res = []
         for s, e in self._chunks(B, N):
             part, inside = self._part_values(enc, points[:, s:e], dense)
@@ -417,6 +524,24 @@ class Volume(BodyVolume):
         verts, faces, _, _ = marching_cubes(field, level=level, spacing=tuple(spacing))
         # skimage winds triangles outward when the field grows inward only after a flip
         return trimesh.Trimesh(verts + lo.cpu().numpy(), faces[:, ::-1], process=False)
+
+
+def _assemble(parts: list, chunks: list, B: int, N: int) -> torch.Tensor:
+    """Put the (b1 - b0, e - s) results of the chunks (b0, b1, s, e) of a (B, N) query together (differentiably)."""
+    rows = []
+    i = 0
+    while i < len(chunks):
+        b0, b1, s, e = chunks[i]
+        if s == 0 and e == N:
+            rows.append(parts[i])
+            i += 1
+            continue
+        j = i
+        while j < len(chunks) and chunks[j][0] == b0:
+            j += 1
+        rows.append(torch.cat(parts[i:j], dim=1))
+        i = j
+    return torch.cat(rows, dim=0)
 
 
 class _OneBody:

@@ -2,6 +2,7 @@ import pytest
 import torch
 
 from volsmpl.nn.config import VolumeConfig
+from volsmpl.nn.grouped import grouped_supported
 from volsmpl.nn.nbw import NBWDecoder, count_parameters, group_pairs
 from volsmpl.nn.pointnet import ResnetPointNet
 from volsmpl.nn.posenc import positional_encoding
@@ -238,3 +239,51 @@ def test_part_subset_decodes_like_the_naive_decoder(share):
         m.decode_dense(x, bad)
     with pytest.raises(ValueError, match=r"for K=2 parts, expected 4 \(this decoder\)"):
         m.decode_dense(x, gen._replace(parts=None))
+
+
+# ------------------------------------------------------------------ grouped decoding (volsmpl.nn.grouped)
+def _grouped_vs_dense(m, z, x, bi, pi, atol):
+    """decode_grouped on the pairs sorted by group equals decode_dense at the same pairs, values and gradients."""
+    B, K = z.shape[:2]
+    M = x.shape[0]
+    order = torch.argsort(bi * K + pi, stable=True)
+    xs, bs, ps = x[order], bi[order], pi[order]
+    offs = torch.cumsum(torch.bincount(bs * K + ps, minlength=B * K), 0).to(torch.int32)
+    z1, x1 = z.clone().requires_grad_(), xs.clone().requires_grad_()
+    y = m.decode_grouped(x1, offs, m.generate(z1))
+    z2, x2 = z.clone().requires_grad_(), xs.clone().requires_grad_()
+    idx = torch.arange(M)
+    dense_x = torch.zeros(B, K, M, 3, dtype=x.dtype).index_put((bs, ps, idx), x2)
+    d = m.decode_dense(dense_x, m.generate(z2))[bs, ps, idx]
+    torch.testing.assert_close(y, d, atol=atol, rtol=atol)
+    w = torch.randn(M, dtype=x.dtype)
+    gy = torch.autograd.grad((y * w).sum(), (x1, z1), retain_graph=True)
+    for a, b in zip(gy, torch.autograd.grad((d * w).sum(), (x2, z2))):
+        torch.testing.assert_close(a, b, atol=atol, rtol=atol)
+    y.sum().backward()  # an expanded (stride 0) output gradient is accepted too
+
+
+@pytest.mark.skipif(not grouped_supported(torch.float32), reason="no grouped_mm in this torch")
+@pytest.mark.parametrize("hidden, skip", [(8, (2,)), (64, (3,))])
+def test_decode_grouped_matches_dense_with_empty_groups(hidden, skip):
+    m = _tiny(K=4, dtype=torch.float32, hidden=hidden, n_layers=7 if hidden == 64 else 5, skip_layers=skip)
+    g = torch.Generator().manual_seed(3)
+    B, M = 3, 300
+    z = torch.randn(B, 4, 5, generator=g)
+    x = torch.randn(M, 3, generator=g) * 0.5
+    bi = torch.randint(0, B, (M,), generator=g)
+    bi[bi == 1] = 2                                   # body 1 has no pairs
+    pi = torch.randint(0, 3, (M,), generator=g)       # part 3 empty in every body
+    _grouped_vs_dense(m, z, x, bi, pi, atol=1e-5)
+
+
+def test_decode_grouped_refuses_bad_input():
+    m = _tiny(K=2, dtype=torch.float32)
+    gen = m.generate(torch.randn(1, 2, 5))
+    with pytest.raises(ValueError, match="offs"):
+        m.decode_grouped(torch.zeros(4, 3), torch.tensor([2, 4]), gen)           # int64 offsets
+    with pytest.raises(ValueError, match="x_local"):
+        m.decode_grouped(torch.zeros(4, 2), torch.tensor([2, 4], dtype=torch.int32), gen)
+    with pytest.raises(TypeError, match="decode_pairs"):
+        m.double().decode_grouped(torch.zeros(4, 3, dtype=torch.float64), torch.tensor([2, 4], dtype=torch.int32),
+                                  m.double().generate(torch.randn(1, 2, 5, dtype=torch.float64)))

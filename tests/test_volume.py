@@ -68,7 +68,7 @@ def test_far_points_skip_network_and_are_exact(vbody):
     assert (d[0] <= best + 1e-5).all() and (d[0] >= best - 0.02).all()  # sampling grid spacing bound
 
 
-def test_sparse_equals_dense(vbody):
+def test_sparse_equals_dense(vbody, tiny_config):
     p = {k: v.clone().requires_grad_() for k, v in random_pose(3, seed=2).items()}
     out = vbody(**p)
     pts = _near_points(out, 300, seed=2)
@@ -80,10 +80,122 @@ def test_sparse_equals_dense(vbody):
         d = vbody.volume.query(out, pts, dense=dense)
         gp, gpose = torch.autograd.grad(d.square().sum(), (pts, p["body_pose"]), retain_graph=True)
         vals[dense] = (d, gp, gpose)
-    for a, b in zip(vals[False], vals[True]):
+    for a, b in zip(vals[False][:2], vals[True][:2]):
         assert torch.allclose(a, b, atol=1e-5)
+    # the pose gradient sums ~1e3 terms of both signs (far points at 7 m): float32 paths that round differently
+    # (the lean query transforms points by one matmul) differ by more than 1e-5 there, so both are held to a
+    # float64 dense reference (the lean path is the closer one: 0.03 vs 0.12 on a max of 2,500)
+    b64 = volsmpl.create_body()
+    volsmpl.attach_volume(b64, pretrained=False, config=tiny_config)
+    b64.volume.load_state_dict(vbody.volume.state_dict())
+    b64.double()
+    p64 = {k: v.detach().double().requires_grad_() for k, v in p.items()}
+    pts64 = pts.detach().double().requires_grad_()
+    d64 = b64.volume.query(b64(**p64), pts64, dense=True)
+    g64 = torch.autograd.grad(d64.square().sum(), p64["body_pose"])[0]
+    for dense in (False, True):
+        err = (vals[dense][2].double() - g64).abs().max()
+        assert err <= 1e-4 * g64.abs().max(), (dense, float(err))
     parts = [vbody.volume.query_parts(out, pts, dense=d) for d in (False, True)]
     assert torch.allclose(parts[0], parts[1], atol=1e-5)
+
+
+def test_sparse_equals_dense_float64(tiny_config):
+    """In float64 the sparse (lean) and dense paths agree to 1e-5 in values and in all gradients."""
+    b = volsmpl.create_body().to(torch.float64)
+    torch.manual_seed(3)
+    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).to(torch.float64)
+    p = {k: v.clone().requires_grad_() for k, v in random_pose(2, seed=2, dtype=torch.float64).items()}
+    out = b(**p)
+    pts = torch.cat([_near_points(out, 200, seed=2), torch.full((2, 5, 3), 5.0, dtype=torch.float64)], dim=1)
+    pts.requires_grad_()
+    res = []
+    for dense in (False, True):
+        d = vol.query(out, pts, dense=dense)
+        res.append((d, *torch.autograd.grad(d.square().sum(), (pts, p["body_pose"], p["betas"]), retain_graph=True)))
+    for a, c in zip(*res):
+        torch.testing.assert_close(a, c, atol=1e-5, rtol=1e-5)
+
+
+def _brute_force_query(vol, out, pts):
+    """Reference of query: for every (body, part) evaluate the part's decoder on every point (decode_dense of
+    that part alone) and keep it where the point is in the part's box (tested here by hand in the part frame);
+    min over those parts, else min over parts of the box distance. Returns (B, N) and the pair count."""
+    from volsmpl.nn.analytic import box_sdf
+    enc = vol.encode(out)
+    B, N, K = pts.shape[0], pts.shape[1], vol.num_parts
+    res = torch.full((B, N), float("inf"))
+    far = torch.full((B, N), float("inf"))
+    pairs = 0
+    w = enc.code.weights
+    for b in range(B):
+        one = type(w)(tuple(a[b:b + 1] for a in w.weights), tuple(a[b:b + 1] for a in w.biases))  # body b, all parts
+        x = torch.stack([(pts[b] - enc.G[b, k, :3, 3]) @ enc.G[b, k, :3, :3] for k in range(K)])  # (K, N, 3)
+        xin = x if enc.scale is None else (x - enc.center[b, :, None]) / enc.scale[b, :, None]
+        d = vol.net.decoder.decode_dense(xin[None], one)[0]                 # every part on every point (K, N)
+        if enc.scale is not None:
+            d = d * enc.scale[b]
+        for k in range(K):
+            lo, hi = enc.box_min[b, k], enc.box_max[b, k]
+            ins = ((x[k] >= lo) & (x[k] <= hi)).all(dim=1)
+            pairs += int(ins.sum())
+            res[b] = torch.where(ins, torch.minimum(res[b], d[k]), res[b])
+            far[b] = torch.minimum(far[b], box_sdf(x[k], lo, hi))
+    return torch.where(torch.isinf(res), far, res), pairs
+
+
+@pytest.mark.parametrize("pair_decoder", ["tiles", "grouped"])
+def test_lean_query_evaluates_every_pair_once(vbody, pair_decoder):
+    """The lean query (grouped or tiled decoders, whole-body and point chunks) against a brute-force per-part
+    evaluation: a dropped (point, part) pair changes the value (its point gets 0 or another part's value), a
+    double-counted one the decoder count."""
+    vol = vbody.volume
+    out = vbody(**random_pose(3, seed=12))
+    pts = torch.cat([_near_points(out, 500, seed=12), torch.full((3, 3, 3), 4.0)], dim=1)
+    with torch.no_grad():
+        ref, pairs = _brute_force_query(vol, out, pts)
+        old = (vol.engine, vol.pair_decoder, vol.chunk_elems)
+        try:
+            vol.engine, vol.pair_decoder = "lean", pair_decoder
+            # one chunk; 2 whole bodies per chunk; 200 points per chunk (the tiled decoder only: each grouped_mm
+            # call on new group sizes costs ~1 ms on a CPU, which a test of many tiny chunks would multiply)
+            chunkings = (old[2], 2 * 503 * vol.num_parts, 200 * vol.num_parts) if pair_decoder == "tiles" else (old[2],)
+            for elems in chunkings:
+                before = vol.decoder_evaluations
+                got = vol.query(out, pts)
+                assert vol.decoder_evaluations - before == pairs
+                torch.testing.assert_close(got, ref, atol=1e-5, rtol=1e-5)
+                vol.chunk_elems = elems
+        finally:
+            vol.engine, vol.pair_decoder, vol.chunk_elems = old
+
+
+@pytest.mark.parametrize("engine, pair_decoder", [("lean", "grouped"), ("chunked", "tiles")])
+def test_engines_equal_dense_values_and_gradients(vbody, engine, pair_decoder):
+    vol = vbody.volume
+    p = {k: v.clone().requires_grad_() for k, v in random_pose(2, seed=13).items()}
+    out = vbody(**p)
+    pts = torch.cat([_near_points(out, 300, seed=13), torch.full((2, 4, 3), 5.0)], dim=1).requires_grad_()
+    old = (vol.engine, vol.pair_decoder)
+    try:
+        vol.engine, vol.pair_decoder = engine, pair_decoder
+        res = [vol.query(out, pts, dense=d) for d in (False, True)]
+        grads = [torch.autograd.grad(r.square().sum(), (pts, p["body_pose"]), retain_graph=True) for r in res]
+    finally:
+        vol.engine, vol.pair_decoder = old
+    torch.testing.assert_close(res[0], res[1], atol=1e-5, rtol=1e-5)
+    torch.testing.assert_close(grads[0][0], grads[1][0], atol=1e-5, rtol=1e-5)        # points
+    scale = grads[1][1].abs().max()                                                    # pose: see test_sparse_equals_dense
+    assert (grads[0][1] - grads[1][1]).abs().max() <= 1e-4 * scale
+
+
+def test_engine_names_are_checked(vbody):
+    from volsmpl.volume import Volume
+    v = vbody.volume
+    with pytest.raises(ValueError, match="engine"):
+        Volume(v.net, v.partition, v.fingerprint, engine="fast")
+    with pytest.raises(ValueError, match="pair_decoder"):
+        Volume(v.net, v.partition, v.fingerprint, pair_decoder="fast")
 
 
 def test_rigid_motion_moves_field(vbody):

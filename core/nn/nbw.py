@@ -34,6 +34,7 @@ from typing import NamedTuple, Optional, Sequence, Tuple
 import torch
 from torch import nn
 
+from .grouped import augmented_matrices, grouped_mlp, grouped_supported
 from .posenc import positional_encoding, posenc_dim
 
 
@@ -373,6 +374,39 @@ class NBWDecoder(nn.Module):
         return h.squeeze(-1) if self.out_dim == 1 else h
 
     TILE_ROWS = 8192  # rows per cache tile on the no-grad path of decode_pairs
+
+    # ------------------------------------------------------------------ grouped decoding (volsmpl.nn.grouped)
+    def grouped_supported(self, dtype: torch.dtype, device=None) -> bool:
+        """Whether `decode_grouped` runs in `dtype` on `device` here (else use `decode_pairs`)."""
+        return grouped_supported(dtype, device)
+
+    def grouped_matrices(self, gen: NBWWeights) -> Tuple[torch.Tensor, ...]:
+        """Layer matrices of every (body, part) group for `decode_grouped` (make once per encoding).
+
+        Shape: gen for B bodies x K parts -> tuple over layers of (B*K, rows_l, cols_l) (volsmpl.nn.grouped.augmented_matrices)."""
+        B, K = self._check_gen(gen)
+        W = [gen.weights[l].reshape(B * K, self.out_dims[l], self.pt_dims[l]) for l in range(self.n_layers)]
+        b = [gen.biases[l].reshape(B * K, self.out_dims[l]) for l in range(self.n_layers)]
+        return tuple(augmented_matrices(W, b, self.skip_layers, self.hidden))
+
+    def decode_grouped(self, x_local: torch.Tensor, offs: torch.Tensor, gen: NBWWeights, mats=None) -> torch.Tensor:
+        """Evaluate group-sorted pairs, each with its own (body, part) decoder: one grouped matmul per layer
+        (no padding, no loop over groups; volsmpl.nn.grouped). Equals ``decode_pairs`` on the same pairs.
+
+        Shape: x_local (M, 3) rows sorted by group g = body * K + part (part: index into gen's parts),
+        offs (B*K,) int32 cumulative group sizes (offs[-1] == M), gen for B x K -> (M,) (out_dim 1) or (M, out_dim).
+        mats: `grouped_matrices(gen)` when already made. Needs `grouped_supported(x_local.dtype)`.
+        """
+        B, K = self._check_gen(gen)
+        if x_local.dim() != 2 or x_local.shape[1] != 3:
+            raise ValueError(f"decode_grouped expects x_local of shape (M, 3), got {tuple(x_local.shape)}")
+        if offs.shape != (B * K,) or offs.dtype != torch.int32:
+            raise ValueError(f"decode_grouped expects int32 offs of shape ({B * K},), got {offs.dtype} {tuple(offs.shape)}")
+        if not self.grouped_supported(x_local.dtype, x_local.device):
+            raise TypeError(f"decode_grouped: no grouped matmul for {x_local.dtype} in this torch; use decode_pairs")
+        mats = self.grouped_matrices(gen) if mats is None else mats
+        h = grouped_mlp(positional_encoding(x_local, self.pe_levels), offs, mats, self.skip_layers)[:, :self.out_dim]
+        return h.squeeze(-1) if self.out_dim == 1 else h
 
     def _mlp_chunks(self, xs: torch.Tensor, Ws, bs) -> torch.Tensor:
         """Decoder on chunked points. xs (C, n, 3); Ws[l] (C, in_pt_l, out_l); bs[l] (C, 1, out_l)."""

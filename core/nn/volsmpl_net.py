@@ -61,6 +61,18 @@ class VolumetricSMPLNet(nn.Module):
         """x_local (M, 3) in the frame of part part_idx of body body_idx -> (M,)."""
         return self.decoder.decode_pairs(x_local, body_idx, part_idx, code.weights)
 
+    def grouped_supported(self, dtype: torch.dtype, device=None) -> bool:
+        """Whether `decode_grouped` runs in `dtype` on `device` (volsmpl.nn.grouped)."""
+        return self.decoder.grouped_supported(dtype, device)
+
+    def grouped_matrices(self, code: PartCode):
+        """Per-group layer matrices of a code for `decode_grouped` (once per encoding)."""
+        return self.decoder.grouped_matrices(code.weights)
+
+    def decode_grouped(self, x_local: torch.Tensor, offs: torch.Tensor, code: PartCode, mats=None) -> torch.Tensor:
+        """x_local (M, 3) sorted by group body * K' + part, offs (B*K',) int32 cumulative sizes -> (M,)."""
+        return self.decoder.decode_grouped(x_local, offs, code.weights, mats)
+
     def flops_per_pair(self) -> int:
         """FLOPs of one (point, part) decoder evaluation (the NBW decoder's)."""
         return self.decoder.flops_per_pair()
