@@ -40,7 +40,8 @@ from scipy.spatial.transform import Rotation
 
 from volsmpl.scene import ROOM_COUNT, cached, intrinsics_from_fov, look_at, subsample
 
-from .placement import (ACTIVITIES, affords, crop, default_body, load_room, place, room_cloud)
+from .placement import ACTIVITIES, affords, default_body, place
+from .room_checks import crop, load_room, room_cloud
 
 __all__ = ["EgoFrame", "ACTIVITIES", "SPLITS", "make_frames", "scene_points", "scene_mesh", "frame_to_dict",
            "frame_from_dict", "check_frame", "split_rooms", "to_camera", "make_group"]
