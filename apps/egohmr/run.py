@@ -145,7 +145,7 @@ def run_tune(args) -> int:
     split = args.split if args.split != "test" else "val"
     if args.split == "test":
         print("tune: tuning runs on the val split (the test split is for reporting only)")
-    path = check_writable(args.out or "docs/egohmr/tune.json", "file", "--out")
+    path = check_writable(args.out or "out/egohmr_tune.json", "file", "--out")
     body, net, meta, frames, prep, scenes = _setup(args, split)
     base = summarize(sample_frames(net, body, frames, prep, None, None, args.batch, args.seed, scenes))
     print(f"{len(frames)} {split} frames; unguided first")
