@@ -118,6 +118,10 @@ def test_user_frame_and_scan_run_end_to_end(tmp_path, frames, tiny_ckpt):
     uf = load_user_frame(tmp_path / "frame.json")
     cam_mesh = scene_mesh(f)
     assert np.allclose(camera_points(uf, np.asarray(room.vertices)), np.asarray(cam_mesh.vertices), atol=1e-6)
+    from volsmpl.scene.scan import to_y_up
+    v = np.asarray(room.vertices)
+    z_up = np.stack([v[:, 0], -v[:, 2], v[:, 1]], 1)  # the same room as a z-up scan
+    assert np.allclose(camera_points(uf, to_y_up(z_up, "z")), np.asarray(cam_mesh.vertices), atol=1e-6)
     out = tmp_path / "out"
     rc = main(["egohmr", "sample", "--frame", str(tmp_path / "frame.json"), "--scene", str(tmp_path / "room.ply"),
                "--units", "mm", "--guide", "none,volsmpl", "--checkpoint", str(ckpt), "--out", str(out)])

@@ -5,7 +5,7 @@ Table 4, supp. D.2).
     volsmpl egohmr train --out runs/egohmr [--steps 4000] [--resume]
     volsmpl egohmr tune --split val --out docs/egohmr/tune.json     # guidance scale per guide, on val
     volsmpl egohmr sample --guide none,volsmpl,coap,mesh --split test [--frames N] --out out/egohmr
-    volsmpl egohmr sample --frame my_frame.json --scene scan.ply [--units mm] --out out/mine   # apps/egohmr/userframe.py
+    volsmpl egohmr sample --frame my_frame.json --scene scan.ply [--units mm] [--up z] --out out/mine   # userframe.py
 
 Writes OUT/results.json (config, options, summary.<guide>, the paper's Table 4, per-frame records, the measured
 largest batch per guide, machine meta) and OUT/frame_<name>.png for the first --render frames.
@@ -59,6 +59,8 @@ def add_parser(sub):
     p.add_argument("--frame", default=None, help="sample: a user's frame file (JSON, apps/egohmr/userframe.py)")
     p.add_argument("--scene", default=None, help="with --frame: the scene (mesh or point cloud file)")
     p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="--scene's units")
+    p.add_argument("--up", default="y", choices=["y", "z"],
+                   help="--scene's up axis: a z-up scan is turned Y-up before the frame's world_to_camera applies")
     p.add_argument("--steps", type=int, default=d.steps, help="train: optimisation steps")
     p.add_argument("--resume", action="store_true", help="train: continue OUT's run")
     return p

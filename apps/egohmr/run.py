@@ -192,7 +192,7 @@ def run_user_frame(args) -> int:
     from volsmpl.outputs import check_writable, write_atomic
     from volsmpl.provenance import machine_info
     from volsmpl.render import render_camera_view, grid, save_png
-    from volsmpl.scene.scan import read_scan
+    from volsmpl.scene.scan import read_scan, to_y_up
     from scipy.spatial import cKDTree
 
     from .cli import options_of, parse_guides, scales_of
@@ -209,7 +209,7 @@ def run_user_frame(args) -> int:
     scales = scales_of(args, guides)
     out = check_writable(args.out or "out/egohmr_user", "dir", "--out")
     frame = load_user_frame(args.frame)
-    scan = camera_points(frame, read_scan(args.scene, args.units, n_surface=1_000_000, seed=args.seed))
+    scan = camera_points(frame, to_y_up(read_scan(args.scene, args.units, n_surface=1_000_000, seed=args.seed), args.up))
     from volsmpl.devices import check_device
 
     dev = check_device(args.device)
@@ -251,7 +251,7 @@ def run_user_frame(args) -> int:
         print(f"{g:8s} collision {summary[g]['collision_ratio']:.4f}  contact {summary[g]['contact_pct']:.0f} %  "
               f"{secs:.2f} s")
     save_png(out / f"frame_{frame.name}.png", grid([p[0] for p in panels], [p[1] for p in panels], cols=2))
-    doc = {"frame": str(args.frame), "scene": str(args.scene), "units": args.units, "guides": guides,
+    doc = {"frame": str(args.frame), "scene": str(args.scene), "units": args.units, "up": args.up, "guides": guides,
            "scales": scales, "summary": summary, "pelvis": centre.tolist(), "figures": {frame.name: f"frame_{frame.name}.png"},
            "checkpoint": args.checkpoint or "apps/egohmr/egohmr_anny", "meta": machine_info(args.device)}
     write_atomic(out / "results.json", json.dumps(doc, indent=1))

@@ -8,12 +8,12 @@
       "world_to_camera": [[...], [...], [...], [...]]    # optional 4x4 (OpenCV camera axes: x right, y down,
     }                                                    #   z forward); absent: the scene file is in camera coordinates
 
-The scene file (`--scene`, read by volsmpl.scene.scan, `--units` m / cm / mm) is taken in the coordinates
-`world_to_camera` maps from. The network sees everything in the camera frame, so no up axis is needed: the camera's
-pose carries it.
+The scene file (`--scene`, read by volsmpl.scene.scan, `--units` m / cm / mm, `--up` y or z) is turned Y-up
+(a z-up scan's (x, y, z) becomes (x, z, -y)) and then mapped by `world_to_camera`, which is therefore given in
+the Y-up world. The network sees everything in the camera frame.
 
     frame = load_user_frame("my_frame.json")
-    pts = camera_points(frame, read_scan("scan.ply", units="mm", n_surface=1_000_000))   # (N, 3) camera frame
+    pts = camera_points(frame, to_y_up(read_scan("scan.ply", units="mm", n_surface=1_000_000), "z"))  # camera frame
 """
 from __future__ import annotations
 

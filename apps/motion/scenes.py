@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from volsmpl.scene import farthest_point_sample, make_room, room_points
-from volsmpl.scene.scan import UNITS, read_scan
+from volsmpl.scene.scan import UNITS, read_scan, to_y_up
 
 N_POINTS = 16384
 BODY_CLEAR = 0.15     # metres: no obstacle point this close (horizontally) to a start or goal, below BODY_HEIGHT
@@ -107,14 +107,6 @@ def room_scenes(n: int, sequences: int = 8, frames: int = 80, first_seed: int = 
     return out
 
 
-def _to_y_up(p: np.ndarray, up: str) -> np.ndarray:
-    if up == "y":
-        return p
-    if up == "z":   # (x, y, z) z-up -> (x, z, -y) y-up: the floor axes x, y become x, -z
-        return np.stack([p[:, 0], p[:, 2], -p[:, 1]], 1)
-    raise ValueError(f"--up must be 'y' or 'z', got {up!r}")
-
-
 def floor_xz(ab, up: str, units: str) -> np.ndarray:
     """A user's floor coordinates (the input's horizontal axes in order: y-up x,z; z-up x,y; the input's units)
     -> our (x, z) in metres."""
@@ -127,7 +119,7 @@ def load_scene(path, up: str = "y", units: str = "m", n: int = N_POINTS, floor_y
     """A user's mesh or point cloud as a MotionScene (module docstring). The floor is at `floor_y` (metres, after
     conversion; default the 1st percentile of the heights) and the floor points are those within floor_band; the cloud
     is shifted so that the floor is at y = 0."""
-    pts = _to_y_up(read_scan(path, units, n * 4, seed), up)
+    pts = to_y_up(read_scan(path, units, n * 4, seed), up)
     if len(pts) > n:
         pts = pts[farthest_point_sample(pts, n, seed=seed)]
     fy = float(np.percentile(pts[:, 1], 1.0)) if floor_y is None else float(floor_y)

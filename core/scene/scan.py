@@ -2,6 +2,7 @@
 xyz...) or a .npy / .npz / .txt / .csv array of points, in metres.
 
     pts = read_scan("scan.ply", units="mm", n_surface=65536)    # (N, 3) float64, metres
+    pts = to_y_up(pts, "z")                                     # a z-up scan in the Y-up frame
     check_cloud(pts, "scene")                                   # clear errors for empty / NaN / wrong shape
 
 A mesh is sampled on its surface (n_surface area-weighted points); a point cloud is read as it is.
@@ -68,4 +69,13 @@ def read_scan(path, units: str = "m", n_surface: int = 65536, seed: int = 0, opt
     return pts * UNITS[units]
 
 
-__all__ = ["UNITS", "check_cloud", "read_scan"]
+def to_y_up(points: np.ndarray, up: str) -> np.ndarray:
+    """Points of a 'y'-up or 'z'-up scan in our Y-up frame: z-up (x, y, z) -> (x, z, -y). Shape: (N, 3) -> (N, 3)."""
+    if up == "y":
+        return points
+    if up == "z":
+        return np.stack([points[:, 0], points[:, 2], -points[:, 1]], 1)
+    raise ValueError(f"--up must be 'y' or 'z', got {up!r}")
+
+
+__all__ = ["UNITS", "check_cloud", "read_scan", "to_y_up"]
