@@ -17,7 +17,7 @@ import torch
 
 from .diffusion import Guidance, Schedule, sample
 from .guidance import CollisionScore
-from .metrics import collision_ratio, contact, frame_errors, joint_weighted
+from .metrics import collision_ratio, contact, frame_errors, joint_means
 from .pose import POSE_DIM, pose_body, pose_joints
 
 GUIDE_POINTS = 20000  # scene points of the collision score (supp. D.2: 20k in a 2 x 2 m cube)
@@ -109,12 +109,8 @@ def summarize(recs: list[dict]) -> dict:
     if not recs:
         return {"n_frames": 0}
     arr = lambda k: np.array([r[k] for r in recs], dtype=np.float64)  # noqa: E731
-    errs = [{k: arr(k) for k in ("mpjpe_mm", "mpjpe_visible_mm", "mpjpe_invisible_mm", "n_visible", "n_invisible")}]
-    errs[0]["n_all"] = errs[0]["n_visible"] + errs[0]["n_invisible"]
-    return {"n_frames": len(recs),
-            "mpjpe_mm": joint_weighted(errs, "mpjpe_mm", "n_all"),
-            "mpjpe_visible_mm": joint_weighted(errs, "mpjpe_visible_mm", "n_visible"),
-            "mpjpe_invisible_mm": joint_weighted(errs, "mpjpe_invisible_mm", "n_invisible"),
+    errs = {k: arr(k) for k in ("mpjpe_mm", "mpjpe_visible_mm", "mpjpe_invisible_mm", "n_visible", "n_invisible")}
+    return {"n_frames": len(recs), **joint_means(errs),
             "pa_mpjpe_mm": float(arr("pa_mpjpe_mm").mean()),
             "collision_ratio": float(arr("collision_ratio").mean()),
             "contact_pct": 100.0 * float(np.mean([r["contact"] for r in recs])),
@@ -130,11 +126,11 @@ def regressor_and_sample_errors(net, body, frames, seed: int = 0) -> dict:
     res = {}
     for name, pose in (("regressor", d["pose_reg"]), ("diffusion", x)):
         J = pose_joints(body, d["betas_hat"], pose, d["pelvis_hat"])
-        e = frame_errors(J, d["joints"], d["visible"])
-        e["n_all"] = e["n_visible"] + e["n_invisible"]
-        res[f"{name}_mpjpe_mm"] = joint_weighted([e], "mpjpe_mm", "n_all")
-        res[f"{name}_invisible_mm"] = joint_weighted([e], "mpjpe_invisible_mm", "n_invisible") or float("nan")
-        res[f"{name}_visible_mm"] = joint_weighted([e], "mpjpe_visible_mm", "n_visible") or float("nan")
+        m = joint_means(frame_errors(J, d["joints"], d["visible"]))
+        res[f"{name}_mpjpe_mm"] = m["mpjpe_mm"]
+        for kind in ("invisible", "visible"):
+            v = m[f"mpjpe_{kind}_mm"]
+            res[f"{name}_{kind}_mm"] = float("nan") if v is None else v
     res["pelvis_err_mm"] = float(1000 * (d["pelvis_hat"] - d["pelvis"]).norm(dim=-1).mean())
     return res
 

@@ -84,12 +84,16 @@ def frame_errors(pred_joints: torch.Tensor, gt_joints: torch.Tensor, visible: to
             "n_visible": nv.cpu().numpy(), "n_invisible": ni.cpu().numpy()}
 
 
-def joint_weighted(errors: list[dict], key: str, count: str) -> float | None:
-    """Mean over all joints of a kind (visible / invisible) across frames: each frame's per-joint mean weighted
-    by its number of such joints (EgoHMR averages over joints, not frames)."""
-    num = sum(float(np.nansum(d[key] * d[count])) for d in errors)
-    den = sum(float(np.sum(d[count])) for d in errors)
-    return num / den if den else None
+def joint_means(errors: dict) -> dict:
+    """MPJPE over all joints, the visible and the invisible ones, across frames: each frame's per-joint mean
+    weighted by its number of such joints (EgoHMR averages over joints, not frames); None where there are none.
+    errors: frame_errors' keys (arrays over frames) -> {'mpjpe_mm', 'mpjpe_visible_mm', 'mpjpe_invisible_mm'}."""
+    nv, ni = np.asarray(errors["n_visible"], np.float64), np.asarray(errors["n_invisible"], np.float64)
+    out = {}
+    for key, n in (("mpjpe_mm", nv + ni), ("mpjpe_visible_mm", nv), ("mpjpe_invisible_mm", ni)):
+        den = float(n.sum())
+        out[key] = float(np.nansum(np.asarray(errors[key], np.float64) * n)) / den if den else None
+    return out
 
 
-__all__ = ["mpjpe", "procrustes", "pa_mpjpe", "collision_ratio", "contact", "frame_errors", "joint_weighted"]
+__all__ = ["mpjpe", "procrustes", "pa_mpjpe", "collision_ratio", "contact", "frame_errors", "joint_means"]
