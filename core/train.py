@@ -38,9 +38,10 @@ phase starts from a model checkpoint (--init) and anneals from `lr` at step `ann
 
 Data of step s on rank r depend only on (seed, s, r), so a resumed run continues exactly, and `num_workers`
 processes can make batches ahead of the step (DataLoader workers, one torch thread each) with the same result:
-on a GPU machine the exact ground truth (CPU) would otherwise starve the GPU. Checkpoints
-(model + optimiser, safetensors; nothing pickled) are written to <out>/ckpt-<step>/ and published by
-atomically replacing <out>/latest; <out>/log.csv holds the losses, <out>/profile.jsonl the time breakdown of
+on a GPU machine the exact ground truth (CPU) would otherwise starve the GPU. Training states
+(model, optimised weights and Adam's moments in safetensors files of at most 16 MB each, nothing pickled, sha256
+of every file in state.json: `volsmpl.train_state`) are written to <out>/ckpt-<step>/ and published by
+atomically replacing <out>/latest; they continue on any device type; <out>/log.csv holds the losses, <out>/profile.jsonl the time breakdown of
 the logged steps (batch, ground truth, forward+backward, optimiser: `volsmpl.train_batches.StepProfile`). Multi-process: torchrun (DDP, gloo on
 CPU, nccl on CUDA).
 
@@ -66,11 +67,12 @@ import torch.distributed as dist
 
 from .attach import attach_volume
 from .body.model import create_body
-from .checkpoint import load_checkpoint, save_checkpoint
+from .checkpoint import load_checkpoint
 from .models import model_kind
 from .outputs import exclusive_folder, write_atomic
 from .train_batches import StepProfile, batch_stream, write_profile
 from .train_config import TrainConfig, lr_at
+from .train_state import latest_checkpoint, load_optimizer, read_training_state, save_training_state
 
 
 class WeightEMA:
@@ -79,7 +81,7 @@ class WeightEMA:
     avg <- avg + (1 - decay_t) * (live - avg) after every optimiser step, with decay_t = min(decay, (1 + n) / (10 + n))
     (n = updates so far in this process' average) so that an average started from fresh weights forgets them quickly.
     The average of a run is what its checkpoints publish as the model; the live weights are kept beside it
-    (live.safetensors) so that --resume continues the optimisation, not the average.
+    (live-*.safetensors) so that --resume continues the optimisation, not the average.
     """
 
     def __init__(self, module: torch.nn.Module, decay: float, state: dict | None = None, updates: int = 0):
@@ -172,70 +174,6 @@ def _accumulate(model, batch: dict, micro: int, ddp: bool) -> tuple[float, dict]
     return loss, parts
 
 
-# ---------------------------------------------------------------------- checkpoints
-def _optimizer_tensors(opt: torch.optim.Optimizer) -> tuple[dict, dict]:
-    """Adam state as flat tensors (safetensors) + JSON scalars."""
-    tensors, scalars = {}, {"param_groups": [{k: v for k, v in g.items() if k != "params"} for g in opt.param_groups]}
-    for i, (p, st) in enumerate(((p, opt.state[p]) for g in opt.param_groups for p in g["params"])):
-        for k, v in st.items():
-            tensors[f"opt.{i}.{k}"] = (v if torch.is_tensor(v) else torch.tensor(v)).detach().cpu().contiguous()
-    return tensors, scalars
-
-
-def _load_optimizer(opt: torch.optim.Optimizer, tensors: dict, scalars: dict) -> None:
-    params = [p for g in opt.param_groups for p in g["params"]]
-    for i, p in enumerate(params):
-        st = {k.split(".", 2)[2]: v.to(p.device) for k, v in tensors.items() if k.startswith(f"opt.{i}.")}
-        if st:
-            opt.state[p] = st
-    for g, saved in zip(opt.param_groups, scalars["param_groups"]):
-        g.update({k: (tuple(v) if isinstance(v, list) else v) for k, v in saved.items()})
-
-
-def save_training_state(out_dir: Path, step: int, volume, opt, cfg: TrainConfig, summary: dict,
-                        ema: WeightEMA | None = None) -> Path:
-    """Write <out>/ckpt-<step>/{model,optimizer}.* and atomically point <out>/latest at it.
-
-    With an EMA the model file holds the averaged weights and live.safetensors the optimised ones."""
-    from safetensors.torch import save_file
-
-    d = out_dir / f"ckpt-{step:08d}"
-    tmp = out_dir / f".tmp-ckpt-{step:08d}"
-    shutil.rmtree(tmp, ignore_errors=True)
-    tmp.mkdir(parents=True)
-    meta = {"body_fingerprint": volume.fingerprint, "part_table": volume.partition.table.to_dict(),
-            "training": {**summary, "step": step, "train_config": cfg.to_dict()}}
-    live = {k: v.detach().cpu() for k, v in volume.net.state_dict().items()}
-    if ema is not None:
-        meta["training"]["ema_updates"] = ema.updates
-        save_checkpoint(tmp / "model", {k: v.detach().cpu() for k, v in ema.avg.items()}, cfg.model.to_dict(), meta)
-        save_file(live, str(tmp / "live.safetensors"))
-    else:
-        save_checkpoint(tmp / "model", live, cfg.model.to_dict(), meta)
-    tensors, scalars = _optimizer_tensors(opt)
-    save_file(tensors, str(tmp / "optimizer.safetensors"))
-    (tmp / "optimizer.json").write_text(json.dumps({**scalars, "step": step}))
-    shutil.rmtree(d, ignore_errors=True)
-    os.replace(tmp, d)
-    latest_tmp = out_dir / ".latest.tmp"
-    latest_tmp.write_text(d.name)
-    os.replace(latest_tmp, out_dir / "latest")
-    ckpts = sorted(p for p in out_dir.glob("ckpt-*") if p.is_dir())
-    for old in ckpts[:-cfg.keep_ckpts]:
-        shutil.rmtree(old, ignore_errors=True)
-    return d
-
-
-def latest_checkpoint(out_dir: Path) -> Path | None:
-    f = Path(out_dir) / "latest"
-    if not f.exists():
-        return None
-    d = Path(out_dir) / f.read_text().strip()
-    if not (d / "model.safetensors").exists():
-        raise FileNotFoundError(f"{f} points at {d}, which has no model.safetensors; remove {f} to start over.")
-    return d
-
-
 # ---------------------------------------------------------------------- the loop
 def _dist_info():
     if int(os.environ.get("WORLD_SIZE", "1")) > 1:
@@ -252,8 +190,26 @@ def _truncate_log(path: Path, step: int) -> None:
     n = len(LOG_HEADER)
     keep = lines[:1] + [ln for ln in lines[1:] if ln.endswith("\n") and len(ln.split(",")) == n
                         and ln.split(",", 1)[0].isdigit() and int(ln.split(",", 1)[0]) <= step]
+    _replace_lines(path, lines, keep)
+
+
+def _truncate_profile(path: Path, step: int) -> None:
+    """The same for profile.jsonl: drop records after `step` and a line cut short by a killed run."""
+    lines = path.read_text().splitlines(keepends=True)
+    keep = []
+    for ln in lines:
+        try:
+            rec = json.loads(ln) if ln.endswith("\n") else None
+        except json.JSONDecodeError:
+            rec = None
+        if isinstance(rec, dict) and isinstance(rec.get("step"), int) and rec["step"] <= step:
+            keep.append(ln)
+    _replace_lines(path, lines, keep)
+
+
+def _replace_lines(path: Path, lines: list, keep: list) -> None:
     if len(keep) != len(lines):
-        tmp = path.with_suffix(".csv.tmp")
+        tmp = path.with_name(path.name + ".tmp")
         tmp.write_text("".join(keep))
         os.replace(tmp, path)
 
@@ -302,7 +258,7 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
         print(f"no checkpoint in {out_dir}: starting from scratch", file=sys.stderr)
     if not resume and (out_dir / "latest").exists():
         raise FileExistsError(f"{out_dir} already holds a run; pass --resume to continue it or choose another --out.")
-    opt = torch.optim.Adam(volume.net.parameters(), lr=lr_at(cfg, 0))
+    saved = None
     if init is not None and ck is None:
         state, cfg_dict, meta = load_checkpoint(init, expected_fingerprint=volume.fingerprint)
         if cfg_dict != cfg.model.to_dict():
@@ -312,22 +268,9 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
         start = int(meta.get("training", {}).get("step", 0))
         spent = float(meta.get("training", {}).get("train_seconds", 0.0))
     if ck is not None:
-        from safetensors.torch import load_file
-        state, _, meta = load_checkpoint(ck / "model", expected_fingerprint=volume.fingerprint)
-        saved_cfg = meta["training"]["train_config"]
-        if saved_cfg["model"] != cfg.model.to_dict():
-            raise ValueError(f"{ck} was trained with model config {saved_cfg['model']}, not {cfg.model.to_dict()}; "
-                             f"resume with the run's own config ({out_dir}/config.json).")
-        if (ck / "live.safetensors").exists():  # the model file is the average; optimise on from the live weights
-            if not cfg.ema_decay:
-                raise ValueError(f"{ck} holds averaged weights (ema_decay > 0) but the config has ema_decay=0; resume "
-                                 f"with the run's own config ({out_dir}/config.json).")
-            ema_state, state = state, load_file(str(ck / "live.safetensors"))
-            ema_updates = int(meta["training"].get("ema_updates", 0))
-        volume.net.load_state_dict(state)
-        _load_optimizer(opt, load_file(str(ck / "optimizer.safetensors")), json.loads((ck / "optimizer.json").read_text()))
-        start = meta["training"]["step"]
-        spent = float(meta["training"].get("train_seconds", 0.0))
+        saved = read_training_state(ck, volume, cfg)
+        start, spent = saved["step"], saved["train_seconds"]
+        ema_state, ema_updates = saved["ema_state"], saved["ema_updates"]
     end = cfg.steps if max_steps is None else min(cfg.steps, start + max_steps)
     if max_seconds is not None and spent >= max_seconds:
         end = start  # the budget is spent already
@@ -338,6 +281,9 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
                            device=None if cfg.num_workers else device)  # made on the device unless by CPU workers
     volume.to(device)
     volume.train()
+    opt = torch.optim.Adam(volume.net.parameters(), lr=lr_at(cfg, 0))  # after the move: its state lives on the device
+    if saved is not None:
+        load_optimizer(opt, *saved["optimizer"])
     ema = WeightEMA(volume.net, cfg.ema_decay, ema_state, ema_updates) if cfg.ema_decay else None
     volume.net.encoder_bf16 = cfg.encoder_bf16
     step_mod = TrainStep(volume, cfg)  # the body stays on the CPU: batches (and exact GT) are made there
@@ -348,6 +294,8 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
     log_path = out_dir / "log.csv"
     if rank == 0 and log_path.exists():
         _truncate_log(log_path, start)  # rows past the checkpoint were logged by a run that stopped before saving
+    if rank == 0 and (out_dir / "profile.jsonl").exists():
+        _truncate_profile(out_dir / "profile.jsonl", start)
     new_log = rank == 0 and not log_path.exists()
     logf = open(log_path, "a", newline="") if rank == 0 else None
     writer = csv.writer(logf) if logf else None

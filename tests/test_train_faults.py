@@ -18,6 +18,7 @@ from volsmpl.checkpoint import load_checkpoint
 from volsmpl.nn.config import VolumeConfig
 from volsmpl.outputs import exclusive_folder, write_atomic
 from volsmpl.train import LOG_HEADER, latest_checkpoint, train
+from volsmpl.train_state import verify_state
 from volsmpl.train_config import TrainConfig
 
 TINY = VolumeConfig(latent_dim=8, encoder_hidden=8, encoder_blocks=1, n_surface_samples=32, decoder_hidden=8, nbw_rank=2)
@@ -86,9 +87,8 @@ def _check_intact(out):
     for d in sorted(out.glob("ckpt-*")):
         state, _, meta = load_checkpoint(d / "model")  # digests verified
         assert meta["training"]["step"] == int(d.name.split("-")[1])
-        json.loads((d / "optimizer.json").read_text())
-        from safetensors.torch import load_file
-        load_file(str(d / "optimizer.safetensors"))
+        doc = verify_state(d)  # every file against its recorded sha256
+        assert doc["step"] == meta["training"]["step"] and doc["optimizer"]["files"]
     json.loads((out / "config.json").read_text())
     rows = list(csv.reader((out / "log.csv").open()))
     assert rows[0] == LOG_HEADER and all(len(r) == len(LOG_HEADER) for r in rows)
