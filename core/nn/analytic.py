@@ -28,11 +28,14 @@ def box_sdf(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor)
     half = 0.5 * (box_max - box_min)
     q = (x_local - center).abs() - half                                # (..., 3)
     qp = q.clamp(min=0.0)
-    # the norm by hypot, which does not overflow (squares do above 1.8e19 m: inf for distances float32 holds);
-    # its derivative is 0/0 at 0: evaluate it only where the point is strictly outside.
-    pos = qp.amax(dim=-1) > 0
-    qs = torch.where(pos[..., None], qp, torch.ones_like(qp))
-    norm = torch.hypot(torch.hypot(qs[..., 0], qs[..., 1]), qs[..., 2])
+    # the norm as m |qp / m| with m the largest component, which does not overflow (squares do above 1.8e19 m:
+    # inf for distances float32 holds) and has a finite derivative wherever m > 0, also where a component is
+    # exactly 0 on a box face's plane (nested hypot gave 0/0 there); evaluated only where the point is outside.
+    m = qp.amax(dim=-1, keepdim=True)
+    pos = m[..., 0] > 0
+    ms = torch.where(pos[..., None], m, torch.ones_like(m))
+    r2 = (qp / ms).square().sum(dim=-1)  # >= 1 outside
+    norm = ms[..., 0] * torch.where(pos, r2, torch.ones_like(r2)).sqrt()
     outside = torch.where(pos, norm, torch.zeros_like(norm))
     inside = q.amax(dim=-1).clamp(max=0.0)
     return outside + inside
