@@ -191,3 +191,17 @@ def test_end_to_end_every_model(tmp_path):
     assert len(d["cases"]) == 3 and "meta" in d
     assert (out / f"topdown_{d['config']['scenes'][0]}.png").exists()
     assert len(list(out.glob("strip_*.png"))) == 3
+    # a second run with --resume reuses the three sequences (same code, weights, settings, inputs) ...
+    cases = {p.name: p.read_text() for p in (out / "cases").glob("*.json")}
+    assert len(cases) == 3
+    rc = main(["motion", "--model", "volsmpl,coap,mesh", "--w", "coap=0.1", "--scenes", "1", "--sequences", "1",
+               "--frames", "10", "--iters", "2", "--cost-frames", "1", "--cost-repeats", "1", "--render", "1",
+               "--out", str(out), "--resume"])
+    assert rc == 0 and {p.name: p.read_text() for p in (out / "cases").glob("*.json")} == cases
+    again = json.loads((out / "results.json").read_text())
+    assert [c["metrics"]["goal_dist_m"] for c in again["cases"]] == [c["metrics"]["goal_dist_m"] for c in d["cases"]]
+    # ... and recomputes one whose settings differ (3 iterations: a new key, the record is replaced)
+    rc = main(["motion", "--model", "volsmpl", "--scenes", "1", "--sequences", "1", "--frames", "10", "--iters", "3",
+               "--cost-frames", "1", "--cost-repeats", "1", "--render", "0", "--out", str(out), "--resume"])
+    name = f"{d['config']['scenes'][0]}_0_volsmpl.json"
+    assert rc == 0 and (out / "cases" / name).read_text() != cases[name]

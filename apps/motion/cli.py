@@ -16,8 +16,10 @@ OUT/topdown_<scene>.png and OUT/strip_<scene>_<k>_<model>.png for the first --re
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +64,9 @@ def add_parser(sub):
     p.add_argument("--cost-repeats", type=int, default=3, help="repeats of the cost measurement (median)")
     p.add_argument("--render", type=int, default=1, help="frame strips of the first N sequences per scene (0: none)")
     p.add_argument("--out", default="out/motion", help="output folder")
+    p.add_argument("--resume", action="store_true",
+                   help="reuse the sequences OUT/cases/ already holds from an identical run (same code, weights, "
+                        "settings and inputs); the others are computed")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     p.add_argument("--seed", type=int, default=0, help="first room seed")
@@ -141,6 +146,7 @@ def format_table(summary: dict) -> str:
 def run(args) -> int:
     import volsmpl
     from volsmpl import paper
+    from volsmpl.case_store import CaseStore, job_key
     from volsmpl.models import parse_models
     from volsmpl.outputs import check_writable, write_atomic
     from volsmpl.provenance import machine_info
@@ -210,27 +216,38 @@ def run(args) -> int:
 
     records = {(m, w): [] for m in models for w in weights[m]}
     cases = []
+    store = CaseStore(out / "cases", resume=args.resume)
     for sc in scenes:
         paths = {}
+        cloud = hashlib.sha256(np.ascontiguousarray(sc.points, dtype=np.float64).tobytes()
+                               + np.asarray(sc.floor, dtype=bool).tobytes()).hexdigest()
         for k, (s, g) in enumerate(sc.pairs):
             for m in models:
                 for w in weights[m]:
                     cfg = SynthConfig(frames=frames, iters=args.iters, lr=args.lr, residuals=args.residuals,
                                       floor_in_loss=args.floor_in_loss, coll_frames=coll_frames[m], device=args.device)
-                    r = synthesize(model, volumes[m], sc, s, g, w, cfg)
-                    met = r["metrics"]
                     label = m if len(weights[m]) == 1 else _wkey(m, w)
+                    name = f"{sc.name}_{k}_{label}"
+                    key = job_key({"config": asdict(cfg), "w": w, "model": m, "scene": sc.name, "cloud": cloud,
+                                   "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist()},
+                                  modules=[volumes[m]], packages=["volsmpl.apps.motion"])
+                    rec = store.get(name, key)
+                    reused = rec is not None
+                    if not reused:
+                        r = synthesize(model, volumes[m], sc, s, g, w, cfg)
+                        rec = {"scene": sc.name, "sequence": k, "model": m, "w": w, "start": np.asarray(s).tolist(),
+                               "goal": np.asarray(g).tolist(), "frames": frames, "collision_frames": coll_frames[m],
+                               "metrics": r["metrics"]}
+                        if k < args.render:
+                            W.render_strip(r["walk"], body.faces, out / f"strip_{name}.png", every=10)
+                        store.put(name, key, rec)
+                    met = rec["metrics"]
                     paths.setdefault(label, []).append(np.asarray(met["pelvis_xz"]))
-                    rec = {"scene": sc.name, "sequence": k, "model": m, "w": w, "start": np.asarray(s).tolist(),
-                           "goal": np.asarray(g).tolist(), "frames": frames, "collision_frames": coll_frames[m],
-                           "metrics": met}
                     records[(m, w)].append(rec)
                     cases.append(rec)
                     print(f"{sc.name:8s} seq {k} {label:12s} goal {met['goal_dist_m']:.3f} m  collision "
                           f"{met['collision_cm']:.3f} cm ({met['collision_frames_pct']:.0f}% frames)  skate "
-                          f"{met['foot_skate_cm']:.3f} cm  {met['optim_s']:.0f} s")
-                    if k < args.render:
-                        W.render_strip(r["walk"], body.faces, out / f"strip_{sc.name}_{k}_{label}.png", every=10)
+                          f"{met['foot_skate_cm']:.3f} cm  {met['optim_s']:.0f} s" + ("  (reused)" if reused else ""))
         topdown(sc, paths, sc.pairs, path=out / f"topdown_{sc.name}.png")
 
     summary = {}
