@@ -17,6 +17,7 @@ Example::
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import json
@@ -37,7 +38,13 @@ def _hash_files(h, root: Path, files: Iterable[Path]) -> None:
 
 
 def source_digest(packages: Iterable[str] = ()) -> str:
-    """sha256 of the .py files of the `volsmpl` core package (without its apps) and of each named package."""
+    """sha256 of the .py files of the `volsmpl` core package (without its apps) and of each named package, as they
+    were when this process first asked (the code it runs: files edited during a long job do not change its key)."""
+    return _source_digest(tuple(packages))
+
+
+@functools.lru_cache(maxsize=None)
+def _source_digest(packages: tuple) -> str:
     import volsmpl
 
     h = hashlib.sha256()

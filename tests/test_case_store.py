@@ -36,7 +36,10 @@ def test_key_changes_with_config_weights_and_code(tmp_path, monkeypatch):
     pkg.mkdir()
     (pkg / "__init__.py").write_text("A = 1\n")
     monkeypatch.syspath_prepend(str(tmp_path))
+    from volsmpl import case_store
     d0 = source_digest(["fakeapp"])
     (pkg / "__init__.py").write_text("A = 2\n")
+    assert source_digest(["fakeapp"]) == d0  # the code this process runs: fixed at its first call
+    case_store._source_digest.cache_clear()  # a new process
     assert source_digest(["fakeapp"]) != d0
     assert json.dumps(source_digest()).startswith('"sha256:')
