@@ -22,6 +22,7 @@ import torch
 from torch.profiler import record_function
 
 from .boxes import inside_boxes
+from .collision import reduce_penetration
 from .encoding import Encoding, EncodingCache
 from .models import kind_of_network
 from .nn.analytic import box_sdf
@@ -217,36 +218,41 @@ class Volume(EncodingCache, BodyVolume):
         vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped)
         return torch.empty_like(vals).index_put_((order,), vals)
 
-    def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0) -> torch.Tensor:
+    def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0, outside: bool = True) -> torch.Tensor:
         """`query` values of an SDF model on the lean sparse path, for bodies b0 .. b0 + B of the encoding.
         points (B, N, 3) -> (B, N).
 
         One batched matmul takes every point into every part's box-centred frame, u = x_k - c_k (B, N, K, 3:
         each point's K parts contiguous); a point is in box k when |u| <= half-extent on every axis. Points in
         some encoded part's box get the minimum over those parts' decoders (one scatter-min); the others the
-        minimum over parts of the box distance, computed for them only. One host sync (the two counts), then
-        fixed-size nonzero. Same values as `_part_values` + minimum (the dense reference) up to rounding."""
+        minimum over parts of the box distance, computed for them only (outside=False leaves them +inf, for
+        callers to whom a point in no box is worth nothing: the collision loss). The box test runs without autograd;
+        the coordinates of the pairs (and of the points in no box) are formed again from R_k, t_k and the box, so
+        the backward pass touches those only. One host sync (the two counts), then fixed-size nonzero. Same values
+        as `_part_values` + minimum (the dense reference) up to rounding."""
         B, N = points.shape[:2]
         K = self.num_parts
         G, box_min, box_max = (x[b0:b0 + B] for x in (enc.G, enc.box_min, enc.box_max))
         R, t = G[..., :3, :3], G[..., :3, 3]                                  # (B, K, 3, 3), (B, K, 3)
         c = 0.5 * (box_min + box_max)                                         # (B, K, 3)
         half = 0.5 * (box_max - box_min)
-        W = R.permute(0, 2, 1, 3).reshape(B, 3, K * 3)                        # row x @ R_k = (R_k^T x)^T
-        # about the body's own origin o (mean part origin): x @ R - t @ R would cancel world-sized terms
-        o = t.mean(dim=1, keepdim=True)                                       # (B, 1, 3)
-        bias = -(torch.einsum("bki,bkij->bkj", t - o, R) + c).reshape(B, 1, K * 3)
-        u = torch.baddbmm(bias, points - o, W).view(B, N, K, 3)               # x_k - c_k
-        raw = (u.abs() <= half[:, None]).all(dim=-1)                          # (B, N, K)
+        with torch.no_grad():
+            W = R.permute(0, 2, 1, 3).reshape(B, 3, K * 3)                    # row x @ R_k = (R_k^T x)^T
+            # about the body's own origin o (mean part origin): x @ R - t @ R would cancel world-sized terms
+            o = t.mean(dim=1, keepdim=True)                                   # (B, 1, 3)
+            bias = -(torch.einsum("bki,bkij->bkj", t - o, R) + c).reshape(B, 1, K * 3)
+            u = torch.baddbmm(bias, points - o, W).view(B, N, K, 3)           # x_k - c_k, for the box test
+            raw = (u.abs() <= half[:, None]).all(dim=-1)                      # (B, N, K)
+        del u
         inside = raw if enc.slot is None else raw & enc.encoded(K)
         free = ~inside.any(dim=-1)                                            # (B, N)
-        n_pairs, n_free = torch.stack([inside.sum(), free.sum()]).tolist()   # the query's one host sync
+        n_free_t = free.sum() if outside else torch.zeros((), dtype=torch.long, device=free.device)
+        n_pairs, n_free = torch.stack([inside.sum(), n_free_t]).tolist()     # the query's one host sync
         b, n, k = torch.nonzero_static(inside, size=n_pairs).unbind(1)
-        bf, nf = torch.nonzero_static(free, size=n_free).unbind(1)
         self.decoder_evaluations += n_pairs
-        res = u.new_zeros(B * N)
+        res = points.new_full((B * N,), float("inf")) if not outside else points.new_zeros(B * N)
         if n_pairs:
-            ub = u[b, n, k]                                                   # (M, 3)
+            ub = torch.einsum("mi,mij->mj", points[b, n] - t[b, k], R[b, k]) - c[b, k]   # (M, 3) with autograd
             if enc.scale is not None:
                 sc = enc.scale[b0:b0 + B][b, k]
                 xin = ub / sc
@@ -259,7 +265,8 @@ class Volume(EncodingCache, BodyVolume):
                 vals = vals * sc[:, 0]
             res = res.scatter_reduce(0, b * N + n, vals, "amin", include_self=False)
         if n_free:
-            uf = u[bf, nf]                                                    # (F, K, 3)
+            bf, nf = torch.nonzero_static(free, size=n_free).unbind(1)
+            uf = torch.einsum("fki,fkij->fkj", points[bf, nf][:, None] - t[bf], R[bf]) - c[bf]   # (F, K, 3)
             d = box_sdf(uf, -half[bf], half[bf])                              # (F, K)
             if enc.slot is not None:  # a part without a code is absent inside its box (as in _part_values)
                 d = torch.where(raw[bf, nf], float("inf"), d)
@@ -307,14 +314,16 @@ class Volume(EncodingCache, BodyVolume):
         points = check_points(points, out.vertices)
         return self.query_encoded(self._encoding_for(out, points), points, dense)
 
-    def query_encoded(self, enc: Encoding, points: torch.Tensor, dense: bool | None = None) -> torch.Tensor:
+    def query_encoded(self, enc: Encoding, points: torch.Tensor, dense: bool | None = None,
+                      outside: bool = True) -> torch.Tensor:
         """`query` on an explicit encoding (training encodes with fresh surface samples). points (B, N, 3) -> (B, N).
         A subset encoding must have a code for every part whose box holds a point (else those parts are
-        skipped); `query` ensures it."""
+        skipped); `query` ensures it. outside=False may answer +inf instead of the box distance at points in no
+        padded part box (the lean path skips those distances; see collision_loss)."""
         dense = self.dense if dense is None else dense
         B, N = points.shape[:2]
         if self.is_sdf and not dense and self.engine == "lean":
-            res = [self._query_lean(enc, points[b0:b1, s:e], b0) for b0, b1, s, e in self._lean_chunks(B, N)]
+            res = [self._query_lean(enc, points[b0:b1, s:e], b0, outside) for b0, b1, s, e in self._lean_chunks(B, N)]
             return res[0] if len(res) == 1 else _assemble(res, self._lean_chunks(B, N), B, N)
         res = []
         for s, e in self._chunks(B, N):
@@ -333,6 +342,15 @@ class Volume(EncodingCache, BodyVolume):
         if self.is_sdf:
             return torch.relu(-values)
         return values * (values > self.level).to(values.dtype)
+
+    def collision_loss(self, out, points: torch.Tensor, reduction: str = "mean") -> torch.Tensor:
+        """BodyVolume.collision_loss. A point in no padded part box penetrates nothing for every kind (its SDF is
+        the positive box distance, COAP's masked occupancy is 0): its value and gradient are exactly 0, so the box
+        distances of such points are not computed."""
+        check_output(out)
+        points = check_points(points, out.vertices)
+        values = self.query_encoded(self._encoding_for(out, points), points, outside=False)
+        return reduce_penetration(self.penetration(values), reduction)
 
     def selfpen_loss(self, out, n_points: int = 300, generator: torch.Generator | None = None,
                      return_points: bool = False, tau: float = SELFPEN_TAU, code_grad: bool = True):

@@ -5,6 +5,8 @@ the mesh, collision_loss against relu(-query), query against query_parts and the
 loss against a field and sums written by hand."""
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 import torch
@@ -169,3 +171,28 @@ def test_selfpen_loss_against_query_parts_at_the_kept_points(rnd):
         assert involved.any(dim=0).all()  # every kept sample is inside two colliding parts
         expect = (torch.sigmoid(-parts.double() / 0.01) * involved).sum()
     assert float(loss[0]) == pytest.approx(float(expect), rel=1e-5)
+
+
+def test_collision_loss_values_and_gradients_against_the_dense_query(rnd):
+    """collision_loss skips the box distances of points in no padded box (their penetration is exactly 0): its
+    values and its gradients (points, pose, shape) equal relu(-query) on the dense reference path, float64."""
+    b, vol = rnd
+    b64 = copy.deepcopy(b).double()
+    vol64 = b64.volume
+    p = {k: v.double().clone().requires_grad_() for k, v in random_pose(2, seed=11).items()}
+    out = b64(**p)
+    far = torch.full((2, 50, 3), 3.0, dtype=torch.float64)                 # in no box
+    pts = torch.cat([_near(out, 1500, 3).detach(), far], dim=1).requires_grad_()
+    got = vol64.collision_loss(out, pts, reduction="sum")
+    ref = torch.relu(-vol64.query(out, pts, dense=True)).sum(dim=1)
+    assert (got > 0).all()
+    torch.testing.assert_close(got, ref, rtol=1e-10, atol=1e-12)
+    w = torch.tensor([1.0, 0.5], dtype=torch.float64)
+    ga = torch.autograd.grad((got * w).sum(), (pts, *p.values()), retain_graph=True, allow_unused=True)
+    gb = torch.autograd.grad((ref * w).sum(), (pts, *p.values()), allow_unused=True)
+    for x, y in zip(ga, gb):
+        if y is None:
+            assert x is None or not x.any()
+            continue
+        torch.testing.assert_close(x, y, rtol=1e-8, atol=1e-10)
+    assert not ga[0][:, -50:].any()                                        # no gradient at points in no box
