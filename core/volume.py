@@ -243,7 +243,9 @@ class Volume(EncodingCache, BodyVolume):
             bias = -(torch.einsum("bki,bkij->bkj", t - o, R) + c).reshape(B, 1, K * 3)
             u = torch.baddbmm(bias, points - o, W).view(B, N, K, 3)           # x_k - c_k, for the box test
             raw = (u.abs() <= half[:, None]).all(dim=-1)                      # (B, N, K)
-        del u
+        grad = torch.is_grad_enabled() and any(x.requires_grad for x in (points, G, box_min, box_max))
+        if grad:
+            del u  # formed again below for the pairs and the box-free points only, with autograd
         inside = raw if enc.slot is None else raw & enc.encoded(K)
         free = ~inside.any(dim=-1)                                            # (B, N)
         n_free_t = free.sum() if outside else torch.zeros((), dtype=torch.long, device=free.device)
@@ -254,7 +256,7 @@ class Volume(EncodingCache, BodyVolume):
         if not outside and torch.is_grad_enabled():  # stay in the graph: a gradient of exactly 0 where no point is in a box
             res = res + 0.0 * (points.sum() + c.sum())
         if n_pairs:
-            ub = torch.einsum("mi,mij->mj", points[b, n] - t[b, k], R[b, k]) - c[b, k]   # (M, 3) with autograd
+            ub = torch.einsum("mi,mij->mj", points[b, n] - t[b, k], R[b, k]) - c[b, k] if grad else u[b, n, k]  # (M, 3)
             if enc.scale is not None:
                 sc = enc.scale[b0:b0 + B][b, k]
                 xin = ub / sc
@@ -268,7 +270,11 @@ class Volume(EncodingCache, BodyVolume):
             res = res.scatter_reduce(0, b * N + n, vals, "amin", include_self=False)
         if n_free:
             bf, nf = torch.nonzero_static(free, size=n_free).unbind(1)
-            uf = torch.einsum("fki,fkij->fkj", points[bf, nf][:, None] - t[bf], R[bf]) - c[bf]   # (F, K, 3)
+            if grad:  # per body: no (F, K, 3, 3) gather of the frames
+                uf = torch.cat([torch.einsum("fki,kij->fkj", points[i, nf[bf == i]][:, None] - t[i], R[i]) - c[i]
+                                for i in range(B)])                           # (F, K, 3), bf is sorted
+            else:
+                uf = u[bf, nf]
             d = box_sdf(uf, -half[bf], half[bf])                              # (F, K)
             if enc.slot is not None:  # a part without a code is absent inside its box (as in _part_values)
                 d = torch.where(raw[bf, nf], float("inf"), d)
