@@ -5,12 +5,15 @@
     volsmpl hoi fit --case my_case.json --model volsmpl --out out/hoi_fit   # a user's own case file (apps/hoi/case.py)
 
 Writes OUT/results.json (config, summary.<model>, the paper's Table 3, per-case records, machine meta),
-OUT/case_<name>.png for the first --render cases and OUT/summary.png.
+OUT/case_<name>.png for the first --render cases and OUT/summary.png; each finished fit is also kept in
+OUT/cases/<case>_<model>.json (volsmpl.case_store) with the key of what made it (configuration, the case's content,
+the kind's weights, the source code), so a run stopped at any moment continues with --resume, fitting only the
+cases without a matching record.
 """
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, is_dataclass
+from dataclasses import asdict
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -43,11 +46,16 @@ def add_parser(sub):
     p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (paper {d.lr:g})")
     p.add_argument("--w-keypoints", type=float, default=d.w_keypoints, help="weight of the keypoint term (tuned)")
     p.add_argument("--w-silhouette", type=float, default=d.w_silhouette, help="weight of the silhouette term (tuned)")
+    p.add_argument("--contact-fraction", type=float, default=d.contact_fraction,
+                   help="share of a contact part's vertices pulled onto the object (its contact patch); 1: the whole "
+                        "part, the plain one-way Chamfer")
+    p.add_argument("--contact-huber", type=float, default=d.contact_huber,
+                   help="metres: contact distances beyond this count linearly (pseudo-Huber); 0: squared throughout")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     p.add_argument("--render", type=int, default=3, help="case figures for the first N cases (0: none)")
     p.add_argument("--resume", action="store_true",
-                   help="keep the cases already in OUT/results.json (same config, models, split and seed) and fit "
+                   help="reuse the fits in OUT/cases/ made by the same code, configuration, case and weights and fit "
                         "only the others: a long run stopped early continues where it stopped")
     return p
 
@@ -88,28 +96,6 @@ def summarize(results: list) -> dict:
     return out
 
 
-def _record(r) -> dict:
-    """A case result as JSON-ready dict (a FitResult, or a record reloaded by --resume)."""
-    return asdict(r) if is_dataclass(r) else dict(vars(r))
-
-
-def resumed(path: Path, run_key: dict, models: list) -> dict:
-    """{model: [case records]} of an earlier results.json made with the same `run_key` (config, models, split,
-    seed); a clear error when it was made otherwise (nothing is mixed silently)."""
-    if not path.is_file():
-        return {m: [] for m in models}
-    try:
-        prev = json.loads(path.read_text())
-    except ValueError as e:
-        raise ValueError(f"--resume: {path} is not valid JSON ({e}); delete it or use another --out") from None
-    old = {k: prev.get(k) for k in run_key}
-    if json.loads(json.dumps(old)) != json.loads(json.dumps(run_key)):
-        diff = sorted(k for k in run_key if json.dumps(old[k], sort_keys=True) != json.dumps(run_key[k], sort_keys=True))
-        raise ValueError(f"--resume: {path} was made with other {', '.join(diff)}; run with the same settings, "
-                         f"or use another --out")
-    return {m: [SimpleNamespace(**d) for d in prev["cases"].get(m, [])] for m in models}
-
-
 def _volumes(body, models: list, device: str) -> dict:
     import volsmpl
 
@@ -123,8 +109,10 @@ def run(args) -> int:
     from volsmpl.outputs import check_writable, write_atomic
     from volsmpl.provenance import machine_info
 
+    from volsmpl.case_store import CaseStore, job_key
+
     from . import database
-    from .case import load_case
+    from .case import case_to_dict, load_case
     from .figures import case_panel, summary_plot
     from .fit import FitConfig, Problem, fit_case
 
@@ -138,7 +126,7 @@ def run(args) -> int:
     out = check_writable(args.out, "dir", "--out")
     models = parse_models(args.model)
     cfg = FitConfig(iters=args.iters, lr=args.lr, w_keypoints=args.w_keypoints, w_silhouette=args.w_silhouette,
-                    device=args.device)
+                    contact_fraction=args.contact_fraction, contact_huber=args.contact_huber, device=args.device)
     if args.device == "cuda" and not torch.cuda.is_available():
         raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
     if args.threads:
@@ -160,36 +148,31 @@ def run(args) -> int:
     body = volsmpl.create_body().to(args.device)
     volumes = _volumes(body, models, args.device)
     run_key = {"config": asdict(cfg), "models": models, "split": args.split, "seed": args.seed}
-    per_model = resumed(out / "results.json", run_key, models) if args.resume else {m: [] for m in models}
-    done = set.intersection(*({r.name for r in rs} for rs in per_model.values()))
-    for m in models:  # a case finished for some kinds only is fitted again for all
-        per_model[m] = [r for r in per_model[m] if r.name in done]
-    if done:
-        print(f"--resume: {len(done)} case(s) already in {out / 'results.json'}")
-    summary = {m: summarize(rs) for m, rs in per_model.items()}
+    store = CaseStore(out / "cases", resume=args.resume)
+    per_model = {m: [] for m in models}
     for i, case in enumerate(cases):
-        if case.name in done:
-            continue
-        # one problem serves every kind: it reads only the body, the object and the partition they share
-        problem = Problem(case, body, volumes[models[0]], cfg)
+        problem = None  # built when a kind needs fitting: it reads only what every kind shares
         results = {}
         for m in models:
-            r = fit_case(case, body, volumes[m], cfg, problem)
+            key = job_key({"config": asdict(cfg), "model": m, "case": case_to_dict(case)}, modules=[volumes[m]],
+                          packages=["volsmpl.apps.hoi"])
+            rec = store.get(f"{case.name}_{m}", key)
+            reused = rec is not None
+            if not reused:
+                problem = problem or Problem(case, body, volumes[m], cfg)
+                rec = asdict(fit_case(case, body, volumes[m], cfg, problem))
+                store.put(f"{case.name}_{m}", key, rec)
+            r = SimpleNamespace(**rec)
             per_model[m].append(r)
             results[m] = r
-            a, b = r.after, r.before
-            num = lambda d, k: float("nan") if d.get(k) is None else d[k]  # noqa: E731 - None: not defined (a ball's rotation)
-            print(f"{case.name:24s} {m:8s} {r.ms_per_iter:8.2f} ms/it  collision {b['collision_pct']:5.1f} -> "
-                  f"{a['collision_pct']:5.1f} %  contact {num(b, 'contact_cm'):6.2f} -> "
-                  f"{num(a, 'contact_cm'):6.2f} cm  object {num(a, 'obj_trans_err_cm'):6.2f} cm "
-                  f"{num(a, 'obj_rot_err_deg'):5.1f} deg")
+            print(case_line(case.name, m, r) + ("  (reused)" if reused else ""))
         if i < args.render:
-            case_panel(out / f"case_{case.name}.png", problem, results)
+            case_panel(out / f"case_{case.name}.png", problem or Problem(case, body, volumes[models[0]], cfg), results)
         # results so far, after every case: a long run stopped early still leaves its finished cases
         summary = {m: summarize(rs) for m, rs in per_model.items()}
         result = {
             **run_key, "cases_requested": len(cases), "paper": paper.rows("hoi"), "summary": summary,
-            "cases": {m: [_record(r) for r in rs] for m, rs in per_model.items()},
+            "cases": {m: [dict(vars(r)) for r in rs] for m, rs in per_model.items()},
             "figures": {"summary": "summary.png",
                         **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: min(i + 1, args.render)]}},
             "checkpoints": {m: (f"core/assets/{model_kind(m).checkpoint}" if model_kind(m).learned else None)
@@ -198,9 +181,20 @@ def run(args) -> int:
         }
         summary_plot(out / "summary.png", summary)
         write_atomic(out / "results.json", json.dumps(result, indent=1))
+    if store.reused:
+        print(f"--resume: {store.reused} fit(s) reused from {out / 'cases'}; {store.stale} stale record(s) refitted")
     print(format_table(summary))
     print(f"wrote {out / 'results.json'}")
     return 0
+
+
+def case_line(name: str, model: str, r) -> str:
+    """One fitted case's line: time per step, collisions, contact and the object's errors before -> after."""
+    a, b = r.after, r.before
+    num = lambda d, k: float("nan") if d.get(k) is None else d[k]  # noqa: E731 - None: not defined (a ball's rotation)
+    return (f"{name:24s} {model:8s} {r.ms_per_iter:8.2f} ms/it  collision {b['collision_pct']:5.1f} -> "
+            f"{a['collision_pct']:5.1f} %  contact {num(b, 'contact_cm'):6.2f} -> {num(a, 'contact_cm'):6.2f} cm  "
+            f"object {num(a, 'obj_trans_err_cm'):6.2f} cm {num(a, 'obj_rot_err_deg'):5.1f} deg")
 
 
 def format_table(summary: dict) -> str:
