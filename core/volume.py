@@ -257,17 +257,6 @@ class Volume(EncodingCache, BodyVolume):
             res = res + 0.0 * (points.sum() + c.sum())
         if n_pairs:
             ub = torch.einsum("mi,mij->mj", points[b, n] - t[b, k], R[b, k]) - c[b, k] if grad else u[b, n, k]  # (M, 3)
-            if enc.scale is not None:
-                sc = enc.scale[b0:b0 + B][b, k]
-                xin = ub / sc
-            else:
-                xin = ub + c[b, k]
-            kc = k if enc.slot is None else enc.slot[k]
-            with record_function(DECODER_SCOPE):
-                vals = self._decode_xin(enc, xin, b + b0, kc)
-            if enc.scale is not None:
-                vals = vals * sc[:, 0]
-            res = res.scatter_reduce(0, b * N + n, vals, "amin", include_self=False)
         if n_free:
             bf, nf = torch.nonzero_static(free, size=n_free).unbind(1)
             if grad:  # per body: no (F, K, 3, 3) gather of the frames
@@ -279,6 +268,21 @@ class Volume(EncodingCache, BodyVolume):
             if enc.slot is not None:  # a part without a code is absent inside its box (as in _part_values)
                 d = torch.where(raw[bf, nf], float("inf"), d)
             res = res.index_put((bf * N + nf,), d.amin(dim=1))
+            del uf, d
+        if not grad:
+            del u  # before the decoders: their activations are the query's other large buffers
+        if n_pairs:
+            if enc.scale is not None:
+                sc = enc.scale[b0:b0 + B][b, k]
+                xin = ub / sc
+            else:
+                xin = ub + c[b, k]
+            kc = k if enc.slot is None else enc.slot[k]
+            with record_function(DECODER_SCOPE):
+                vals = self._decode_xin(enc, xin, b + b0, kc)
+            if enc.scale is not None:
+                vals = vals * sc[:, 0]
+            res = res.scatter_reduce(0, b * N + n, vals, "amin", include_self=False)
         return res.view(B, N)
 
     def _lean_chunks(self, B: int, N: int) -> list:
