@@ -26,6 +26,8 @@ import re
 from pathlib import Path
 from typing import Iterable
 
+from .outputs import write_atomic
+
 __all__ = ["CaseStore", "job_key", "source_digest"]
 
 _NAME = re.compile(r"^[A-Za-z0-9_.=+-]+$")
@@ -101,15 +103,5 @@ class CaseStore:
     def put(self, name: str, key: str, record) -> Path:
         """Write case `name`'s record and its key atomically (JSON-serialisable)."""
         p = self._path(name)
-        self.folder.mkdir(parents=True, exist_ok=True)
-        tmp = p.with_name(p.name + f".tmp{os.getpid()}")
-        try:
-            with open(tmp, "w") as f:
-                f.write(json.dumps({"key": key, "record": record}, allow_nan=True))
-                f.flush()
-                os.fsync(f.fileno())
-            os.replace(tmp, p)
-        finally:
-            if tmp.exists():
-                tmp.unlink()
+        write_atomic(p, json.dumps({"key": key, "record": record}, allow_nan=True))
         return p
