@@ -93,7 +93,7 @@ def test_case_round_trips_and_bad_cases_are_named(body, tmp_path):
     user = {**d, "object": {"category": "ball", "mesh": "ball_mm.ply", "units": "mm"}, "contacts": [["right_hand", "any"]]}
     (tmp_path / "user.json").write_text(json.dumps(user))
     prob = Problem(load_case(tmp_path / "user.json"), body, vol, FitConfig())
-    assert prob.mesh.extents.max() == pytest.approx(0.22, rel=1e-2)
+    assert prob.meshes[0].extents.max() == pytest.approx(0.22, rel=1e-2)
     (tmp_path / "empty.ply").write_text("ply\nformat ascii 1.0\nelement vertex 0\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n")
     (tmp_path / "empty.json").write_text(json.dumps({**user, "object": {"category": "ball", "mesh": "empty.ply"}}))
     with pytest.raises(ValueError, match="no triangles"):
@@ -142,6 +142,12 @@ def test_resume_reuses_fits_of_the_same_code_and_settings_only(body, tmp_path, c
     assert cli_main([a if a != "3" else "4" for a in args] + ["--resume"]) == 0
     assert "(reused)" not in capsys.readouterr().out  # another configuration: fitted anew
     assert json.loads((tmp_path / "out" / "results.json").read_text())["cases"]["mesh"][0]["iterations"] == 4
+    # the batch size is part of a fit's key (its time per case depends on it); a batch below 1 is refused
+    assert cli_main([a if a != "3" else "4" for a in args] + ["--resume", "--batch", "2"]) == 0
+    assert "(reused)" not in capsys.readouterr().out
+    assert json.loads((tmp_path / "out" / "results.json").read_text())["batch"] == 2
+    assert cli_main(args + ["--batch", "0"]) == 2
+    assert "--batch must be >= 1" in capsys.readouterr().err
 
 
 def _state(problem, sim):
@@ -196,7 +202,7 @@ def test_scales_converge_to_their_priors_when_the_image_terms_are_indifferent(bo
     prob = Problem(case, body, vol, cfg)
     r = fit_case(case, body, vol, cfg, prob)
     assert r.human["scale"] == pytest.approx(1.0, abs=0.01)
-    assert r.object["scale"] == pytest.approx(prob.prior_object, abs=0.01)
+    assert r.object["scale"] == pytest.approx(float(prob.prior_object[0]), abs=0.01)
 
 
 @pytest.mark.parametrize("kind", ["volsmpl", "coap"])
@@ -233,7 +239,8 @@ def test_seated_case_pulls_the_buttocks_onto_the_seat_top():
     prob = Problem(case, body, vol, FitConfig())
     st = _state(prob, case.truth)
     rel = relative_similarity(prob.similarity(st, "human"), prob.similarity(st, "object"))
-    p, n, q, nq, tri = prob.pairs[case.contacts.index(("pelvis", "seat"))]
+    p, n, q, nq, tri = (torch.as_tensor(x, dtype=torch.float32)[None]
+                        for x in prob.pairs[case.contacts.index(("pelvis", "seat"))])
     args = (p, n, to_camera(q, *rel), nq @ rel[1].transpose(1, 2), torch.ones(q.shape[:2], dtype=torch.bool))
     tri_body = to_camera(tri.flatten(1, 2), *rel).view(tri.shape)
     c, _, _, patch = contact_terms(*args, prob.contact_fraction, tri_body)

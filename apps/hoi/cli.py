@@ -54,6 +54,8 @@ def add_parser(sub):
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     p.add_argument("--render", type=int, default=3, help="case figures for the first N cases (0: none)")
+    p.add_argument("--batch", type=int, default=1,
+                   help="cases optimised together (padded; each as if alone); ms/iter is the batch's divided by it")
     p.add_argument("--resume", action="store_true",
                    help="reuse the fits in OUT/cases/ made by the same code, configuration, case and weights and fit "
                         "only the others: a long run stopped early continues where it stopped")
@@ -114,7 +116,7 @@ def run(args) -> int:
     from . import database
     from .case import case_to_dict, load_case
     from .figures import case_panel, summary_plot
-    from .fit import FitConfig, Problem, fit_case
+    from .fit import FitConfig, Problem, fit_cases
 
     if args.action == "make-db":
         if args.n < 1:
@@ -123,6 +125,8 @@ def run(args) -> int:
         paths = database.make_database(args.n, args.seed, folder)
         print(f"{len(paths)} cases in {folder}")
         return 0
+    if args.batch < 1:
+        raise ValueError(f"--batch must be >= 1 (cases optimised together), got {args.batch}")
     out = check_writable(args.out, "dir", "--out")
     models = parse_models(args.model)
     cfg = FitConfig(iters=args.iters, lr=args.lr, w_keypoints=args.w_keypoints, w_silhouette=args.w_silhouette,
@@ -147,34 +151,39 @@ def run(args) -> int:
             raise ValueError(f"no cases selected (split {args.split!r}, cases {args.cases!r})")
     body = volsmpl.create_body().to(args.device)
     volumes = _volumes(body, models, args.device)
-    run_key = {"config": asdict(cfg), "models": models, "split": args.split, "seed": args.seed}
+    run_key = {"config": asdict(cfg), "models": models, "split": args.split, "seed": args.seed, "batch": args.batch}
     store = CaseStore(out / "cases", resume=args.resume)
     per_model = {m: [] for m in models}
-    for i, case in enumerate(cases):
-        problem = None  # built when a kind needs fitting: it reads only what every kind shares
-        results = {}
+    for i0 in range(0, len(cases), args.batch):
+        group = cases[i0:i0 + args.batch]
+        results = {c.name: {} for c in group}
         for m in models:
-            key = job_key({"config": asdict(cfg), "model": m, "case": case_to_dict(case)}, modules=[volumes[m]],
-                          packages=["volsmpl.apps.hoi"])
-            rec = store.get(f"{case.name}_{m}", key)
-            reused = rec is not None
-            if not reused:
-                problem = problem or Problem(case, body, volumes[m], cfg)
-                rec = asdict(fit_case(case, body, volumes[m], cfg, problem))
-                store.put(f"{case.name}_{m}", key, rec)
-            r = SimpleNamespace(**rec)
-            per_model[m].append(r)
-            results[m] = r
-            print(case_line(case.name, m, r) + ("  (reused)" if reused else ""))
-        if i < args.render:
-            case_panel(out / f"case_{case.name}.png", problem or Problem(case, body, volumes[models[0]], cfg), results)
-        # results so far, after every case: a long run stopped early still leaves its finished cases
+            # the batch size is part of a fit's key: its time per case depends on it
+            keys = {c.name: job_key({"config": asdict(cfg), "model": m, "case": case_to_dict(c),
+                                     **({"batch": args.batch} if args.batch > 1 else {})},
+                                    modules=[volumes[m]], packages=["volsmpl.apps.hoi"]) for c in group}
+            recs = {c.name: store.get(f"{c.name}_{m}", keys[c.name]) for c in group}
+            todo = [c for c in group if recs[c.name] is None]
+            if todo:
+                for c, r in zip(todo, fit_cases(todo, body, volumes[m], cfg)):
+                    recs[c.name] = asdict(r)
+                    store.put(f"{c.name}_{m}", keys[c.name], recs[c.name])
+            for c in group:
+                r = SimpleNamespace(**recs[c.name])
+                per_model[m].append(r)
+                results[c.name][m] = r
+                print(case_line(c.name, m, r) + ("" if c in todo else "  (reused)"))
+        for j, c in enumerate(group):
+            if i0 + j < args.render:
+                case_panel(out / f"case_{c.name}.png", Problem(c, body, volumes[models[0]], cfg), results[c.name])
+        # results so far, after every batch: a long run stopped early still leaves its finished cases
+        done = i0 + len(group)
         summary = {m: summarize(rs) for m, rs in per_model.items()}
         result = {
             **run_key, "cases_requested": len(cases), "paper": paper.rows("hoi"), "summary": summary,
             "cases": {m: [dict(vars(r)) for r in rs] for m, rs in per_model.items()},
             "figures": {"summary": "summary.png",
-                        **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: min(i + 1, args.render)]}},
+                        **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: min(done, args.render)]}},
             "checkpoints": {m: (f"core/assets/{model_kind(m).checkpoint}" if model_kind(m).learned else None)
                             for m in models},
             "meta": machine_info(args.device),

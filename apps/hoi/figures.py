@@ -24,10 +24,10 @@ def case_camera(case):
     return PinholeCamera(K, torch.eye(4, dtype=torch.float64)[None], torch.tensor([float(H)]), torch.tensor([float(W)]))
 
 
-def _placed(problem, sim: dict):
+def _placed(problem, sim: dict, i: int):
     sh, so = (Similarity.from_dict(_sim(sim[k]), k) for k in ("human", "object"))
-    v = sh.apply(problem.body_v[0].cpu().numpy())
-    o = so.apply(np.asarray(problem.mesh.vertices))
+    v = sh.apply(problem.body_v[i].cpu().numpy())
+    o = so.apply(np.asarray(problem.meshes[i].vertices))
     return v, o
 
 
@@ -35,18 +35,19 @@ def _sim(s):
     return s if isinstance(s, dict) else s.to_dict()
 
 
-def _inside(problem, sim: dict) -> np.ndarray:
+def _inside(problem, sim: dict, i: int) -> np.ndarray:
     """Object vertices inside the placed body (exact mesh test), (N,) bool."""
     from volsmpl.mesh_distance import mesh_signed_distance
 
-    v, o = _placed(problem, sim)
+    v, o = _placed(problem, sim, i)
     d = mesh_signed_distance(torch.as_tensor(v), problem.faces.cpu(), torch.as_tensor(o), closed=True)
     return (d < 0).numpy()
 
 
-def case_panel(path, problem, results: dict, size: int = 320) -> None:
-    """One case: [image or first-stage view, first-stage view] + per model [fitted camera view, fitted side view]."""
-    case, faces = problem.case, np.asarray(problem.faces.cpu())
+def case_panel(path, problem, results: dict, i: int = 0, size: int = 320) -> None:
+    """Case i of a Problem: [image or first-stage view, first-stage view] + per model [fitted camera view, fitted
+    side view]."""
+    case, faces, obj_faces = problem.cases[i], np.asarray(problem.faces.cpu()), np.asarray(problem.meshes[i].faces)
     cam = case_camera(case)
     images, labels = [], []
     if case.image and case.source is not None and (case.source / case.image).is_file():
@@ -56,17 +57,17 @@ def case_panel(path, problem, results: dict, size: int = 320) -> None:
     states = [("first stage", {k: _sim(s) for k, s in case.init.items()})]
     states += [(f"fit {m}", {"human": r.human, "object": r.object}) for m, r in results.items()]
     for label, sim in states:
-        v, o = _placed(problem, sim)
-        ins = _inside(problem, sim)
-        images.append(render_camera_view([(v, faces, BODY), (o, np.asarray(problem.mesh.faces), OBJECT)], cam,
+        v, o = _placed(problem, sim, i)
+        ins = _inside(problem, sim, i)
+        images.append(render_camera_view([(v, faces, BODY), (o, obj_faces, OBJECT)], cam,
                                          points=o[ins], point_colors=INSIDE))
         labels.append(f"{label} ({ins.mean() * 100:.1f}% inside)")
     up = np.diag([1.0, -1.0, -1.0])  # camera frame (y down, z forward) -> a Y-up frame for the side view
-    centre = np.concatenate(_placed(problem, states[-1][1])).mean(0) @ up
+    centre = np.concatenate(_placed(problem, states[-1][1], i)).mean(0) @ up
     for label, sim in states[1:]:
-        v, o = (x @ up for x in _placed(problem, sim))
-        ins = _inside(problem, sim)
-        images.append(render_scene([(v, faces, BODY), (o, np.asarray(problem.mesh.faces), OBJECT)], size=size,
+        v, o = (x @ up for x in _placed(problem, sim, i))
+        ins = _inside(problem, sim, i)
+        images.append(render_scene([(v, faces, BODY), (o, obj_faces, OBJECT)], size=size,
                                    yaw=90.0, center=centre, points=o[ins], point_colors=INSIDE))
         labels.append(f"{label}, side")
     h = max(im.shape[0] for im in images)

@@ -58,7 +58,9 @@ def _nearest(p: torch.Tensor, q: torch.Tensor, q_mask: torch.Tensor):
 
 def contact_terms(part_pts: torch.Tensor, part_normals: torch.Tensor, region_pts: torch.Tensor,
                   region_normals: torch.Tensor, region_mask: torch.Tensor, fraction: float = 1.0,
-                  region_tris: torch.Tensor | None = None, tri_mask: torch.Tensor | None = None, huber: float = 0.0):
+                  region_tris: torch.Tensor | None = None, tri_mask: torch.Tensor | None = None, huber: float = 0.0,
+                  part_mask: torch.Tensor | None = None, patch_k: torch.Tensor | None = None,
+                  tri_owner: torch.Tensor | None = None):
     """L_contact and L_normal of one interacting pair per case (module docstring).
 
     Shape: part_pts / part_normals (B, P, 3) (the body part's vertices and unit normals); region_pts /
@@ -75,6 +77,10 @@ def contact_terms(part_pts: torch.Tensor, part_normals: torch.Tensor, region_pts
     small for the rest of the run); 0: the squared distance.
     A case whose region has no point (triangle) facing the part (all behind it) uses the whole region; one whose
     part has no vertex facing the region uses every vertex as a candidate.
+    Padded batches (cases of different sizes): part_mask (B, P) marks each case's part vertices (padding False);
+    patch_k (B,) int is each case's patch size (default: ceil(fraction * P), the same for all cases). Triangles
+    without padding: region_tris (T, 3, 3) of all cases at once with tri_owner (T,) int64, each one's case (every
+    case at least one; tri_mask unused): a case's patch is measured against its own triangles only.
     Example:
         >>> p = torch.zeros(1, 1, 3); n = torch.tensor([[[0., 1, 0]]])
         >>> q = torch.tensor([[[0., 0.1, 0]]]); nq = torch.tensor([[[0., -1, 0]]])
@@ -84,21 +90,30 @@ def contact_terms(part_pts: torch.Tensor, part_normals: torch.Tensor, region_pts
     """
     if not 0.0 < fraction <= 1.0:
         raise ValueError(f"fraction must be in (0, 1], got {fraction}")
-    centre = part_pts.mean(dim=1, keepdim=True)  # (B, 1, 3)
+    if part_mask is None:
+        part_mask = torch.ones(part_pts.shape[:2], dtype=torch.bool, device=part_pts.device)
+    pm = part_mask.to(part_pts.dtype)[..., None]
+    centre = (part_pts * pm).sum(dim=1, keepdim=True) / pm.sum(dim=1, keepdim=True).clamp_min(1.0)  # (B, 1, 3)
     facing = _facing(centre, region_pts, region_normals, region_mask)
     d2, idx = _nearest(part_pts, region_pts, facing)
     nq = torch.gather(region_normals, 1, idx[..., None].expand(-1, -1, 3))
     cos = torch.nn.functional.cosine_similarity(part_normals, nq, dim=-1)  # (B, P)
-    opposing = cos < 0
-    candidate = torch.where(opposing.any(dim=1, keepdim=True), opposing, torch.ones_like(opposing))
-    k = max(1, math.ceil(fraction * part_pts.shape[1]))
-    _, sel = torch.topk(d2.detach().masked_fill(~candidate, float("inf")), k, dim=1, largest=False)  # (B, k)
+    opposing = (cos < 0) & part_mask
+    candidate = torch.where(opposing.any(dim=1, keepdim=True), opposing, part_mask)
+    if patch_k is None:
+        k = max(1, math.ceil(fraction * part_pts.shape[1]))
+        patch_k = torch.full(part_pts.shape[:1], k, device=part_pts.device)
+    k = int(patch_k.max())
+    _, sel = torch.topk(d2.detach().masked_fill(~candidate, float("inf")), k, dim=1, largest=False)  # (B, k), nearest first
     patch = torch.zeros_like(candidate).scatter(1, sel, True) & candidate  # fewer than k candidates: those
-    w = torch.gather(patch, 1, sel).to(d2.dtype)  # (B, k)
+    w = torch.gather(patch, 1, sel) & (torch.arange(k, device=sel.device) < patch_k[:, None])  # each case's own k
+    patch = torch.zeros_like(candidate).scatter(1, sel, w)
+    w = w.to(d2.dtype)
     if region_tris is None:
         d2k, nk = torch.gather(d2, 1, sel), _take(nq, sel)
     else:
-        d2k, nk = _nearest_triangles(_take(part_pts, sel), region_tris, centre, tri_mask)
+        near = _nearest_triangles if tri_owner is None else _nearest_owned_triangles
+        d2k, nk = near(_take(part_pts, sel), region_tris, centre, tri_mask if tri_owner is None else tri_owner)
     if huber > 0:
         d2k = 2 * huber ** 2 * ((1 + d2k / huber ** 2).sqrt() - 1)
     # the normals of the two contact sets: the patch's mean normal and that of the region where its vertices are nearest
@@ -132,6 +147,28 @@ def _nearest_triangles(p: torch.Tensor, tris: torch.Tensor, centre: torch.Tensor
     return d2, torch.gather(normal, 1, j[..., None].expand(-1, -1, 3))
 
 
+def _nearest_owned_triangles(p: torch.Tensor, tris: torch.Tensor, centre: torch.Tensor, owner: torch.Tensor):
+    """`_nearest_triangles` without padding: triangles (T, 3, 3) of all B cases, owner (T,) the case of each; each
+    case's points p (B, k, 3) against its own triangles only (T x k distances in all)."""
+    a, b, c = tris.unbind(dim=1)  # (T, 3) each
+    normal = torch.nn.functional.normalize(torch.linalg.cross(b - a, c - a), dim=-1)
+    facing = (((centre[owner, 0] - (a + b + c) / 3) * normal).sum(-1) > 0)  # (T,)
+    n_facing = torch.zeros(p.shape[0], dtype=torch.long, device=p.device).index_add(0, owner, facing.long())
+    facing = facing | (n_facing[owner] == 0)  # a case with no triangle facing its part uses all of its triangles
+    po = p[owner]  # (T, k, 3)
+    q = closest_points_on_triangles(po, a[:, None], b[:, None], c[:, None])  # (T, k, 3)
+    d2 = (po - q).square().sum(-1).masked_fill(~facing[:, None], float("inf"))  # (T, k)
+    with torch.no_grad():  # the nearest triangle of each (case, point); ties: the last
+        k = p.shape[1]
+        own = owner[:, None].expand(-1, k)
+        best = d2.new_full(p.shape[:2], float("inf")).scatter_reduce(0, own, d2, "amin")
+        rows = torch.arange(len(owner), device=p.device)[:, None].expand(-1, k)
+        j = torch.full(p.shape[:2], -1, dtype=torch.long, device=p.device).scatter_reduce(
+            0, own, torch.where(d2 == best[owner], rows, -1), "amax")
+    cols = torch.arange(k, device=p.device)[None].expand_as(j)
+    return d2[j, cols], normal[j]
+
+
 def relative_similarity(human, obj):
     """The object's frame -> the human's body frame, x_body = s R x + t, from the two camera-frame similarities
     (scale (B,), R (B, 3, 3), t (B, 3)) each: s = s_o / s_h, R = R_h^T R_o, t = R_h^T (t_o - t_h) / s_h."""
@@ -144,7 +181,9 @@ def body_query(volume, out):
     that stays as it is through the fit: a learned kind encodes its parts once (`volume.encode`: all parts) and
     every call only decodes (`query_encoded`); the exact mesh kind measures the exact signed distances to the
     posed mesh at every call (`query`)."""
-    if hasattr(volume, "encode"):
+    from volsmpl.models import model_kind
+
+    if model_kind(volume.kind).learned:
         enc = volume.encode(out)
         return lambda x: volume.penetration(volume.query_encoded(enc, x))
     return lambda x: volume.penetration(volume.query(out, x))
