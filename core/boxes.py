@@ -17,6 +17,39 @@ def obb(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
     return centre, G[..., :3, :3], 0.5 * (box_max - box_min)
 
 
+def world_bounds(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Axis-aligned world bounds of each body's placed part boxes (their 8 corners each).
+
+    Shape: G (B, K, 4, 4) part-to-world, box_min/max (B, K, 3) in part frames -> lo, hi (B, 3)."""
+    B, K = box_min.shape[:2]
+    pick = torch.tensor([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=torch.bool, device=G.device)
+    corners = torch.where(pick, box_max[:, :, None], box_min[:, :, None])            # (B, K, 8, 3)
+    world = corners @ G[..., :3, :3].transpose(-1, -2) + G[:, :, None, :3, 3]
+    world = world.reshape(B, K * 8, 3)
+    return world.amin(dim=1), world.amax(dim=1)
+
+
+def near_boxes(points: torch.Tensor, G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
+    """The points within each body's world bounds of its part boxes (`world_bounds`), packed to the front: a
+    point outside them is in no part box. One host sync (the largest count).
+
+    Shape: points (B, N, 3) -> packed (B, M, 3) (rows of each body's own points, its points inside first; M the
+    largest count), rows (B, M) int64 (their indices into N, distinct per body), valid (B, M) bool (False: a
+    filler point from outside, in no box). Example:
+        >>> packed, rows, valid = near_boxes(pts, enc.G, enc.box_min, enc.box_max)
+        >>> full = torch.zeros(B, N).scatter(1, rows, torch.where(valid, values_at(packed), 0.0))
+    """
+    with torch.no_grad():
+        lo, hi = world_bounds(G.detach(), box_min.detach(), box_max.detach())
+        p = points.detach()
+        inside = ((p >= lo[:, None]) & (p <= hi[:, None])).all(dim=-1)              # (B, N)
+        M = int(inside.sum(dim=1).max()) if inside.numel() else 0
+        rows = torch.argsort((~inside).to(torch.uint8), dim=1, stable=True)[:, :M]  # inside first
+        valid = torch.gather(inside, 1, rows)
+    packed = torch.gather(points, 1, rows[..., None].expand(-1, -1, 3))
+    return packed, rows, valid
+
+
 def boxes_overlap(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor, eps: float = 1e-9) -> torch.Tensor:
     """Exact pairwise overlap test of oriented boxes by the separating axis theorem (15 axes).
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import torch
 from torch.profiler import record_function
 
-from .boxes import inside_boxes
+from .boxes import inside_boxes, near_boxes
 from .collision import reduce_penetration
 from .encoding import Encoding, EncodingCache
 from .models import kind_of_network
@@ -357,12 +357,20 @@ class Volume(EncodingCache, BodyVolume):
 
     def collision_loss(self, out, points: torch.Tensor, reduction: str = "mean") -> torch.Tensor:
         """BodyVolume.collision_loss. A point in no padded part box penetrates nothing for every kind (its SDF is
-        the positive box distance, COAP's masked occupancy is 0): its value and gradient are exactly 0, so the box
-        distances of such points are not computed."""
+        the positive box distance, COAP's masked occupancy is 0): its value and gradient are exactly 0. So only
+        the points within each body's world bounds of its boxes (boxes.near_boxes: a scene cloud around a body
+        mostly lies outside them) are queried, and the box distances of those in no box are not computed."""
         check_output(out)
         points = check_points(points, out.vertices)
-        values = self.query_encoded(self._encoding_for(out, points), points, outside=False)
-        return reduce_penetration(self.penetration(values), reduction)
+        enc = None if self.training else self._cached(out, self.cache_key(out))
+        frames = self._frames(out) if enc is None else (enc.G, enc.box_min, enc.box_max)
+        packed, rows, valid = near_boxes(points, *frames)
+        values = self.query_encoded(self._encoding_for(out, packed, frames), packed, outside=False)
+        pen = torch.where(valid, self.penetration(values), 0.0)
+        full = pen.new_zeros(points.shape[:2]).scatter(1, rows, pen)
+        if torch.is_grad_enabled() and not full.requires_grad:  # no point near a body: gradients of exactly 0
+            full = full + 0.0 * (points.sum() + frames[1].sum())
+        return reduce_penetration(full, reduction)
 
     def selfpen_loss(self, out, n_points: int = 300, generator: torch.Generator | None = None,
                      return_points: bool = False, tau: float = SELFPEN_TAU, code_grad: bool = True):

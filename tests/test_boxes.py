@@ -6,7 +6,7 @@ import torch
 from scipy.optimize import linprog
 from scipy.spatial.transform import Rotation
 
-from volsmpl.boxes import boxes_overlap, sample_overlaps
+from volsmpl.boxes import boxes_overlap, near_boxes, sample_overlaps, world_bounds
 
 
 def _random_boxes(K, seed):
@@ -66,3 +66,37 @@ def test_sample_overlaps_inside_both():
             assert (loc >= lo[k] - 1e-9).all() and (loc <= hi[k] + 1e-9).all()
     empty, eid = sample_overlaps(G, lo, hi, torch.zeros(0, 2, dtype=torch.long))
     assert empty.shape == (0, 3) and eid.shape == (0,)
+
+
+def test_near_boxes_keeps_every_point_in_a_box_and_packs_exactly():
+    """world_bounds contain every placed box (points drawn inside the boxes, brute force) and touch their corners;
+    near_boxes keeps every such point, packs each body's own points (rows distinct, packed == points[rows]) and
+    drops points beyond the bounds."""
+    rng = np.random.default_rng(3)
+    B, K = 3, 5
+    G = torch.eye(4, dtype=torch.float64).repeat(B, K, 1, 1)
+    G[..., :3, :3] = torch.as_tensor(Rotation.random(B * K, random_state=4).as_matrix()).view(B, K, 3, 3)
+    G[..., :3, 3] = torch.as_tensor(rng.normal(size=(B, K, 3)))
+    lo = torch.as_tensor(-rng.uniform(0.05, 0.3, size=(B, K, 3)))
+    hi = torch.as_tensor(rng.uniform(0.05, 0.3, size=(B, K, 3)))
+    u = torch.as_tensor(rng.uniform(size=(B, K, 40, 3)))
+    local = lo[:, :, None] + u * (hi - lo)[:, :, None]
+    in_box = (local @ G[..., :3, :3].transpose(-1, -2) + G[..., None, :3, 3]).reshape(B, K * 40, 3)
+    far = torch.as_tensor(rng.normal(size=(B, 300, 3))) * 0.2 + 10.0                # beyond every box
+    pts = torch.cat([far[:, :150], in_box, far[:, 150:]], dim=1)
+    wlo, whi = world_bounds(G, lo, hi)
+    corners = torch.stack([torch.where(torch.tensor([i >> 2 & 1, i >> 1 & 1, i & 1], dtype=torch.bool), hi, lo)
+                           for i in range(8)], dim=2)
+    cw = corners @ G[..., :3, :3].transpose(-1, -2) + G[..., None, :3, 3]
+    assert torch.allclose(wlo, cw.reshape(B, -1, 3).amin(1)) and torch.allclose(whi, cw.reshape(B, -1, 3).amax(1))
+    packed, rows, valid = near_boxes(pts, G, lo, hi)
+    assert packed.shape[1] == K * 40 and valid.all()
+    for b in range(B):
+        assert rows[b].unique().numel() == rows.shape[1]
+        assert set(rows[b].tolist()) == set(range(150, 150 + K * 40))
+    assert torch.equal(packed, torch.gather(pts, 1, rows[..., None].expand(-1, -1, 3)))
+    # a body with fewer near points than another gets filler rows marked invalid
+    pts2 = pts.clone()
+    pts2[0, 150:170] = 10.0
+    _, rows2, valid2 = near_boxes(pts2, G, lo, hi)
+    assert valid2[0].sum() == K * 40 - 20 and valid2[1:].all() and not valid2[0, -20:].any()
