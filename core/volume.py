@@ -362,8 +362,7 @@ class Volume(EncodingCache, BodyVolume):
         mostly lies outside them) are queried, and the box distances of those in no box are not computed."""
         check_output(out)
         points = check_points(points, out.vertices)
-        enc = None if self.training else self._cached(out, self.cache_key(out))
-        frames = self._frames(out) if enc is None else (enc.G, enc.box_min, enc.box_max)
+        frames = self._frames(out)  # for the bounds, and for the encoding when none is cached
         packed, rows, valid = near_boxes(points, *frames)
         values = self.query_encoded(self._encoding_for(out, packed, frames), packed, outside=False)
         pen = torch.where(valid, self.penetration(values), 0.0)
