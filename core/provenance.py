@@ -40,10 +40,20 @@ def load_avg() -> Optional[List[float]]:
         return None
 
 
-def git_commit() -> Optional[str]:
-    """Short commit hash of the source checkout this package runs from (None outside a git checkout)."""
+#: written into an exported package (`git archive` has no .git) with the commit it was exported from
+SOURCE_COMMIT = "SOURCE_COMMIT"
+
+
+def git_commit(package_dir=None) -> Optional[str]:
+    """Short commit hash of the code this package runs from: the commit named in its SOURCE_COMMIT file when it is
+    an export (long CLI jobs run from one, so that edits of the checkout do not change what they run), else the
+    HEAD of the git checkout it lies in; None when neither. package_dir: this package's folder (default)."""
+    folder = Path(package_dir) if package_dir is not None else Path(__file__).resolve().parent
+    marker = folder / SOURCE_COMMIT
+    if marker.is_file():
+        return marker.read_text().strip() or None
     try:
-        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).resolve().parent,
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=folder,
                              capture_output=True, text=True, timeout=10)
         return (out.stdout.strip() or None) if out.returncode == 0 else None
     except (OSError, subprocess.SubprocessError):
