@@ -58,22 +58,40 @@ def test_padded_contact_terms_equal_each_pair_alone(fraction):
         assert torch.equal(patch[i, : pa.shape[1]], pa[0]) and not patch[i, pa.shape[1]:].any()
 
 
+@pytest.fixture(scope="module")
+def two_cases():
+    """A seated chair and a held cup: different objects, contact pairs and sizes."""
+    return db._default_body()[0], [db.make_case(0, seed=0), db.make_case(8, seed=0)]
+
+
 @pytest.mark.parametrize("kind", ["volsmpl", "mesh"])
-def test_a_batch_of_cases_fits_each_case_as_alone(kind):
+def test_a_batch_of_cases_fits_each_case_as_alone(kind, two_cases):
     """Two generated cases of different objects, contact pairs and sizes (a seated chair and a held cup) fitted
     together end where each ends alone (same Adam steps: the losses are summed, Adam is per element)."""
-    body, _ = db._default_body()
-    cases = [db.make_case(0, seed=0), db.make_case(8, seed=0)]
+    body, cases = two_cases
     assert len({len(c.contacts) for c in cases}) == 2 or cases[0].category != cases[1].category
     vol = volsmpl.attach_volume(body, model=kind)
-    cfg = FitConfig(iters=25)
+    cfg = FitConfig(iters=12)
     both = fit_cases(cases, body, vol, cfg)
     for case, r in zip(cases, both):
         a = fit_case(case, body, vol, cfg)
-        assert r.name == case.name and r.batch == 2 and r.iterations == a.iterations == 25
+        assert r.name == case.name and r.batch == 2 and r.iterations == a.iterations == 12
         for who in ("human", "object"):
             assert r.__dict__[who]["scale"] == pytest.approx(a.__dict__[who]["scale"], rel=1e-4)
             assert np.allclose(r.__dict__[who]["translation"], a.__dict__[who]["translation"], atol=2e-4)
             assert np.allclose(r.__dict__[who]["rotation"], a.__dict__[who]["rotation"], atol=2e-4)
         assert r.after["contact_cm"] == pytest.approx(a.after["contact_cm"], abs=0.05)
         assert r.loss[0] == pytest.approx(a.loss[0], rel=1e-4)
+
+
+def test_contact_regions_by_kd_trees_equal_brute_force():
+    """The metrics' ground-truth contact regions (points within 2 cm of the other set) by k-d trees equal the
+    brute-force distance matrix's."""
+    from volsmpl.apps.hoi.fit import _within
+
+    g = torch.Generator().manual_seed(0)
+    a, b = torch.rand(3000, 3, generator=g), torch.rand(500, 3, generator=g) * 0.5
+    d = torch.cdist(a.double(), b.double())
+    na, nb = _within(a, b, 0.05)
+    assert 0 < int(na.sum()) < len(a) and 0 < int(nb.sum()) < len(b)
+    assert torch.equal(na, d.min(1).values < 0.05) and torch.equal(nb, d.min(0).values < 0.05)

@@ -150,6 +150,17 @@ def fit_case(case: HoiCase, body, volume, cfg: FitConfig = FitConfig(), problem:
     return fit_cases([case], body, volume, cfg, problem)[0]
 
 
+def _within(a: torch.Tensor, b: torch.Tensor, radius: float):
+    """(A,) and (B,) bool: the points of a (A, 3) within `radius` of some point of b (B, 3), and the converse
+    (k-d trees: the (A, B) distance matrix of a body and an object's samples is ~50 M entries)."""
+    from scipy.spatial import cKDTree
+
+    x, y = (t.detach().cpu().double().numpy() for t in (a, b))
+    da = cKDTree(y).query(x, distance_upper_bound=radius)[0]
+    db = cKDTree(x).query(y, distance_upper_bound=radius)[0]
+    return (torch.as_tensor(da < radius, device=a.device), torch.as_tensor(db < radius, device=a.device))
+
+
 @torch.no_grad()
 def case_metrics(problem: Problem, sim: dict, i: int = 0) -> dict:
     """Exact metrics of case i's placement {'human': Similarity, 'object': Similarity}: object vertices inside the
@@ -172,8 +183,7 @@ def case_metrics(problem: Problem, sim: dict, i: int = 0) -> dict:
         return m
     body_t = to_camera(body_v, *args(truth["human"]))[0]
     obj_t = to_camera(samples, *args(truth["object"]))[0]
-    near_b = torch.cdist(body_t, obj_t).min(dim=1).values < CONTACT_RADIUS
-    near_o = torch.cdist(obj_t, body_t).min(dim=1).values < CONTACT_RADIUS
+    near_b, near_o = _within(body_t, obj_t, CONTACT_RADIUS)
     if near_b.any() and near_o.any():
         b = to_camera(body_v, *args(h))[0][near_b]
         ob = to_camera(samples, *args(o))[0][near_o]
