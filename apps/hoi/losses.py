@@ -105,8 +105,8 @@ def contact_terms(part_pts: torch.Tensor, part_normals: torch.Tensor, region_pts
         patch_k = torch.full(part_pts.shape[:1], k, device=part_pts.device)
     k = int(patch_k.max())
     _, sel = torch.topk(d2.detach().masked_fill(~candidate, float("inf")), k, dim=1, largest=False)  # (B, k), nearest first
-    patch = torch.zeros_like(candidate).scatter(1, sel, True) & candidate  # fewer than k candidates: those
-    w = torch.gather(patch, 1, sel) & (torch.arange(k, device=sel.device) < patch_k[:, None])  # each case's own k
+    # the selected candidates (fewer than k candidates: those), up to each case's own k
+    w = torch.gather(candidate, 1, sel) & (torch.arange(k, device=sel.device) < patch_k[:, None])
     patch = torch.zeros_like(candidate).scatter(1, sel, w)
     w = w.to(d2.dtype)
     if region_tris is None:
