@@ -2,10 +2,11 @@
 
 B cases are optimised together (one Adam over their stacked variables; their losses are summed, so each case
 moves as if alone, `volsmpl.optim.harness`). What differs in size between cases is padded with a copy of a valid
-row and masked: object vertices (`obj_mask`), silhouette pixels and vertices, and the contact pairs, which are
-flattened over the batch (pair p belongs to case `pair_case[p]`) with their part vertices (`part_mask`) and region
-points padded; the regions' triangles are not padded (`tri_owner`: the pair of each). The body is posed once for all B cases (its pose and shape are
-the first stage's and stay fixed); contact and penetration are measured in each case's body frame.
+row and masked: object vertices (`obj_mask`; placed 1 km away, `FAR`), silhouette pixels and vertices, and the
+contact pairs, which are flattened over the batch (pair p belongs to case `pair_case[p]`) with their part vertices
+(`part_mask`) and region points padded; the regions' triangles are not padded (`tri_owner`: the pair of each). The
+body is posed once for all B cases (its pose and shape are the first stage's and stay fixed); contact and
+penetration are measured in each case's body frame.
 
     prob = Problem([case_a, case_b], body, volume, FitConfig()).prepare(volume)
     state = prob.variables([case_a.init, case_b.init])    # Variables (B, ...) for volsmpl.optim.optimize
@@ -43,7 +44,7 @@ def _pad(rows: list, dev, dtype=torch.float32, fill=None):
     n = max(len(r) for r in rows)
     out, mask = [], torch.zeros(len(rows), n, dtype=torch.bool, device=dev)
     for i, r in enumerate(rows):
-        r = torch.as_tensor(np.asarray(r), dtype=dtype, device=dev)
+        r = torch.as_tensor(r if torch.is_tensor(r) else np.asarray(r), dtype=dtype, device=dev)
         pad = r[:1] if fill is None else torch.as_tensor(fill, dtype=dtype, device=dev).expand(1, *r.shape[1:])
         out.append(torch.cat([r, pad.expand(n - len(r), *r.shape[1:])]) if len(r) < n else r)
         mask[i, : len(r)] = True
