@@ -36,6 +36,8 @@ class ModelKind:
         config: 'module:Class' of the network's config (learned kinds).
         checkpoint: file stem (in core/assets) of the shipped checkpoint for the default body, or None.
         train_loss: the training objective of `volsmpl train`: 'sdf' (eq. 3) or 'occupancy' (binary cross-entropy).
+        grouped: True when the network decodes (point, part) pairs by grouped matmuls (`decode_grouped`, the
+            query engine's pair_decoder 'grouped'); the others decode them by chunks (`decode_pairs`).
     """
 
     name: str
@@ -46,6 +48,7 @@ class ModelKind:
     config: str | None = None
     checkpoint: str | None = None
     train_loss: str | None = None
+    grouped: bool = False
 
     @property
     def default_checkpoint(self) -> Path | None:
@@ -85,7 +88,7 @@ MODELS: dict[str, ModelKind] = {
     "volsmpl": ModelKind(
         "volsmpl", "VolumetricSMPL: NBW part decoders, signed distance (this paper)", output="sdf", learned=True,
         network="volsmpl.nn.volsmpl_net:VolumetricSMPLNet", config="volsmpl.nn.config:VolumeConfig",
-        checkpoint="volsmpl_anny", train_loss="sdf"),
+        checkpoint="volsmpl_anny", train_loss="sdf", grouped=True),
     "coap": ModelKind(
         "coap", "COAP baseline: part occupancy networks (Mihajlovic et al. 2022)", output="occupancy", learned=True,
         network="volsmpl.nn.coap_net:CoapNet", config="volsmpl.nn.coap_net:CoapConfig",

@@ -24,7 +24,7 @@ from torch.profiler import record_function
 from .boxes import inside_boxes, near_boxes
 from .collision import reduce_penetration
 from .encoding import Encoding, EncodingCache
-from .models import kind_of_network
+from .models import kind_of_network, model_kind
 from .nn.analytic import box_sdf
 from .nn.volsmpl_net import PartCode
 from .partition import Partition
@@ -187,7 +187,7 @@ class Volume(EncodingCache, BodyVolume):
 
     def _grouped_ok(self, x: torch.Tensor) -> bool:
         """Whether the pairs x (M, 3) are decoded by grouped matmuls (pair_decoder, network, dtype and device)."""
-        return (self.pair_decoder == "grouped" and hasattr(self.net, "decode_grouped")
+        return (self.pair_decoder == "grouped" and model_kind(self.kind).grouped
                 and self.net.grouped_supported(x.dtype, x.device))
 
     def _decode(self, enc: Encoding, x_local: torch.Tensor, b, k, n) -> torch.Tensor:

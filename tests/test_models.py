@@ -149,3 +149,24 @@ def test_mesh_selfpen_finds_a_crossed_arm_and_pushes_it_out(body):
     out2 = body(betas=case.betas.reshape(1, -1), global_orient=case.global_orient.reshape(1, 3), body_pose=moved)
     after = vol.selfpen_loss(out2, generator=torch.Generator().manual_seed(0))
     assert float(after[0]) < float(loss[0])
+
+
+def test_the_registry_says_which_kinds_decode_pairs_by_grouped_matmuls(monkeypatch):
+    """With pair_decoder 'grouped', VolumetricSMPL's query decodes its pairs by grouped matmuls where this torch
+    has them; the registry, not the network's attributes, says which kinds can."""
+    import torch
+
+    import volsmpl
+    from volsmpl.models import model_kind
+
+    assert model_kind("volsmpl").grouped and not model_kind("coap").grouped and not model_kind("mesh").grouped
+    body = volsmpl.create_body()
+    vol = volsmpl.attach_volume(body, model="volsmpl")
+    vol.pair_decoder = "grouped"
+    calls = []
+    decode = vol.net.decode_grouped
+    monkeypatch.setattr(vol.net, "decode_grouped", lambda *a, **k: calls.append(1) or decode(*a, **k))
+    with torch.no_grad():
+        out = body()
+        vol.query(out, out.vertices[0, ::50] + 0.005)
+    assert bool(calls) == vol.net.grouped_supported(torch.float32, "cpu")
