@@ -157,6 +157,7 @@ def run(args) -> int:
     for i0 in range(0, len(cases), args.batch):
         group = cases[i0:i0 + args.batch]
         results = {c.name: {} for c in group}
+        problem = None  # the group's Problem, built once: it reads only what every kind shares (prepare sets the kind)
         for m in models:
             # the batch size is part of a fit's key: its time per case depends on it
             keys = {c.name: job_key({"config": asdict(cfg), "model": m, "case": case_to_dict(c),
@@ -165,7 +166,10 @@ def run(args) -> int:
             recs = {c.name: store.get(f"{c.name}_{m}", keys[c.name]) for c in group}
             todo = [c for c in group if recs[c.name] is None]
             if todo:
-                for c, r in zip(todo, fit_cases(todo, body, volumes[m], cfg)):
+                whole = len(todo) == len(group)
+                if whole:
+                    problem = problem or Problem(group, body, volumes[m], cfg)
+                for c, r in zip(todo, fit_cases(todo, body, volumes[m], cfg, problem if whole else None)):
                     recs[c.name] = asdict(r)
                     store.put(f"{c.name}_{m}", keys[c.name], recs[c.name])
             for c in group:
@@ -175,7 +179,8 @@ def run(args) -> int:
                 print(case_line(c.name, m, r) + ("" if c in todo else "  (reused)"))
         for j, c in enumerate(group):
             if i0 + j < args.render:
-                case_panel(out / f"case_{c.name}.png", Problem(c, body, volumes[models[0]], cfg), results[c.name])
+                problem = problem or Problem(group, body, volumes[models[0]], cfg)
+                case_panel(out / f"case_{c.name}.png", problem, results[c.name], j)
         # results so far, after every batch: a long run stopped early still leaves its finished cases
         done = i0 + len(group)
         summary = {m: summarize(rs) for m, rs in per_model.items()}
