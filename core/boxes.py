@@ -18,15 +18,12 @@ def obb(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
 
 
 def world_bounds(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Axis-aligned world bounds of each body's placed part boxes (their 8 corners each).
+    """Axis-aligned world bounds of each body's placed part boxes (of their `obb`s: centre +- |R| half extents).
 
     Shape: G (B, K, 4, 4) part-to-world, box_min/max (B, K, 3) in part frames -> lo, hi (B, 3)."""
-    B, K = box_min.shape[:2]
-    pick = torch.tensor([[i >> 2 & 1, i >> 1 & 1, i & 1] for i in range(8)], dtype=torch.bool, device=G.device)
-    corners = torch.where(pick, box_max[:, :, None], box_min[:, :, None])            # (B, K, 8, 3)
-    world = corners @ G[..., :3, :3].transpose(-1, -2) + G[:, :, None, :3, 3]
-    world = world.reshape(B, K * 8, 3)
-    return world.amin(dim=1), world.amax(dim=1)
+    c, R, h = obb(G, box_min, box_max)
+    reach = (R.abs() @ h[..., None])[..., 0]                                          # (B, K, 3)
+    return (c - reach).amin(dim=1), (c + reach).amax(dim=1)
 
 
 def near_boxes(points: torch.Tensor, G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
