@@ -7,7 +7,7 @@ import torch
 import trimesh
 from scipy.spatial.distance import pdist
 
-from volsmpl.scene.points import crop_cube, farthest_point_sample, sample_surface, subsample, to_torch
+from volsmpl.scene.points import crop_cube, farthest_point_loop, farthest_point_sample, sample_surface, subsample, to_torch
 
 
 def _fps_reference(p: np.ndarray, n: int, start: int) -> np.ndarray:
@@ -59,6 +59,30 @@ def test_fps_matches_reference_and_spreads():
     assert pdist(p[idx]).min() > 2 * pdist(p[rand]).min()
     t = farthest_point_sample(torch.as_tensor(p), 10)
     assert np.array_equal(t, _fps_reference(p, 10, 0))
+
+
+def test_torch_fps_picks_what_open3d_picks_ties_included(monkeypatch):
+    """The torch loop (used where open3d does not import) against open3d itself: random points, and a grid with
+    duplicated points, whose distances tie exactly."""
+    import builtins
+    grid = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 9)] * 3), -1).reshape(-1, 3)
+    clouds = [np.random.default_rng(2).random((4000, 3)), np.concatenate([grid, grid[:40]])]
+    expected = [[farthest_point_sample(c, 300, seed=s) for s in (None, 4)] for c in clouds]
+    real_import = builtins.__import__
+
+    def no_open3d(name, *args, **kw):
+        if name == "open3d":
+            raise ImportError("No module named 'open3d'")
+        return real_import(name, *args, **kw)
+
+    monkeypatch.setattr(builtins, "__import__", no_open3d)
+    for c, exp in zip(clouds, expected):
+        for s, e in zip((None, 4), exp):
+            assert np.array_equal(farthest_point_sample(c, 300, seed=s), e)  # through the fallback
+    start = int(np.random.default_rng(4).integers(len(clouds[0])))
+    assert np.array_equal(farthest_point_loop(clouds[0], 300, start), expected[0][1])
+    with pytest.raises(ValueError, match="start index"):
+        farthest_point_loop(clouds[0], 3, start=len(clouds[0]))
 
 
 def test_fps_errors():

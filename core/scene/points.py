@@ -3,7 +3,8 @@
 - `sample_surface`: area-weighted uniform samples on a triangle mesh (or a subset of its faces) with the face
   normals, seeded (trimesh.sample.sample_surface).
 - `farthest_point_sample`: indices of N points chosen by farthest-point sampling with open3d
-  (`PointCloud.farthest_point_down_sample`). open3d starts from a given index (default 0) and is deterministic for a
+  (`PointCloud.farthest_point_down_sample`), or, where open3d does not import (a CUDA machine without it), the same
+  greedy max-min loop in torch (float64, on the GPU when there is one), which picks the same points. open3d starts from a given index (default 0) and is deterministic for a
   given input order; it returns the chosen points in *input order*, not in the order they were picked, and no
   indices: we carry each point's index through the call in its normal's x channel (exact for < 2**53 points) and
   read it back. `seed` picks the start index (seed=None: open3d's default, index 0). Cost O(N * n): 1.5 s for
@@ -76,7 +77,8 @@ def sample_surface(mesh: trimesh.Trimesh, n: int, seed: int | None = 0, faces=No
 
 
 def farthest_point_sample(points, n: int, seed: int | None = None) -> np.ndarray:
-    """Indices of n points picked by farthest-point sampling (open3d), sorted ascending.
+    """Indices of n points picked by farthest-point sampling (open3d; its loop in torch without open3d), sorted
+    ascending.
 
     Args:
         points: (N, 3) array or tensor, N >= n.
@@ -89,19 +91,50 @@ def farthest_point_sample(points, n: int, seed: int | None = None) -> np.ndarray
         >>> idx = farthest_point_sample(np.random.rand(1000, 3), 100, seed=0)
         >>> sparse = points[idx]
     """
-    import open3d as o3d
-
     p = _as_points(points)
     n = _check_count(n)
     if n > len(p):
         raise ValueError(f"cannot pick n = {n} points from {len(p)}; use subsample(..., method='random') to pad.")
     start = 0 if seed is None else int(np.random.default_rng(seed).integers(len(p)))
+    try:
+        import open3d as o3d
+    except ImportError:
+        return farthest_point_loop(p, n, start)
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
     tag = np.zeros_like(p)
     tag[:, 0] = np.arange(len(p))
     pcd.normals = o3d.utility.Vector3dVector(tag)
     out = pcd.farthest_point_down_sample(n, start)
     return np.asarray(out.normals)[:, 0].round().astype(np.int64)
+
+
+def farthest_point_loop(points, n: int, start: int = 0, device=None) -> np.ndarray:
+    """Farthest-point sampling as open3d does it, in torch: from `start`, repeatedly keep the point whose squared
+    distance (float64, summed x + y + z in that order) to the kept set is largest, the first such on ties. Used by
+    `farthest_point_sample` where open3d does not import.
+
+    Shape: (N, 3) -> (n,) int64 indices, ascending.
+
+    Example:
+        >>> idx = farthest_point_loop(np.random.rand(1000, 3), 100)
+    """
+    p = _as_points(points)
+    if not 0 <= start < len(p):
+        raise ValueError(f"start index {start} is outside the cloud's {len(p)} points.")
+    dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+    x = torch.as_tensor(p, dtype=torch.float64, device=dev)
+    dist = torch.full((len(p),), float("inf"), dtype=torch.float64, device=dev)
+    picked = torch.empty(_check_count(n), dtype=torch.long, device=dev)
+    i = torch.tensor(start, device=dev)
+    for k in range(n):  # the picked index stays on the device: no synchronisation per step
+        picked[k] = i
+        d = x - x[i]
+        d2 = d[:, 0] * d[:, 0]  # separate products and sums: the same rounding on every device
+        d2 = d2 + d[:, 1] * d[:, 1]
+        d2 = d2 + d[:, 2] * d[:, 2]
+        torch.minimum(dist, d2, out=dist)
+        i = torch.argmax(dist)
+    return picked.sort().values.cpu().numpy()
 
 
 def crop_cube(points, center, size: float = 2.0) -> np.ndarray:
