@@ -147,30 +147,34 @@ def derived(r: dict) -> dict:
     return out
 
 
-def profile_query(query, runs: int = 3) -> dict:
+def profile_query(query, runs: int = 3, device="cpu") -> dict:
     """Operator calls of one call of `query` and the time spent in the decoder scope (volume.DECODER_SCOPE).
 
     Shape: query() -> anything. Returns {'ops_per_query': int (top-level aten operator calls of one call),
     'op_names': {name: calls}, 't_decoder_ms': median decoder-scope time over `runs` profiled calls (None when
-    the query never enters the scope)}."""
+    the query never enters the scope)}. On CUDA the scope's time is its kernels' device time (its CPU time
+    there is only the launches)."""
     from torch.profiler import ProfilerActivity, profile
 
     from .volume import DECODER_SCOPE
 
     if runs < 1:
         raise ValueError(f"profile_query needs runs >= 1, got {runs}")
+    cuda = torch.device(device).type == "cuda"
     counts, dec = [], []
     names: dict = {}
     for _ in range(runs):
-        with profile(activities=[ProfilerActivity.CPU]) as prof:
+        with profile(activities=[ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if cuda else [])) as prof:
             query()
+            if cuda:
+                torch.cuda.synchronize(device)
         events = prof.events()
         top = [e for e in events if e.name.startswith("aten::") and _outside_aten(e)]
         counts.append(len(top))
         if not names:
             for e in top:
                 names[e.name] = names.get(e.name, 0) + 1
-        scoped = [e.cpu_time_total / 1e3 for e in events if e.name == DECODER_SCOPE]
+        scoped = [(e.device_time_total if cuda else e.cpu_time_total) / 1e3 for e in events if e.name == DECODER_SCOPE]
         if scoped:
             dec.append(sum(scoped))
     return {"ops_per_query": int(np.median(counts)), "op_names": dict(sorted(names.items(), key=lambda kv: -kv[1])),
@@ -250,7 +254,7 @@ def volume_job(job: dict) -> dict:
         evals0 = vol.decoder_evaluations if counts else 0
         t_query = timed_ms([query] * rep, device)
         pairs = (vol.decoder_evaluations - evals0) // rep if counts else None
-        res.update(profile_query(query, min(3, rep)))
+        res.update(profile_query(query, min(3, rep), device))
     if job.get("return_pred"):
         torch.save(pred["v"].cpu(), job["pred_path"])
     res.update(t_ms=float(np.median(t_full)), t_query_ms=float(np.median(t_query)), t_ms_all=t_full,
