@@ -69,8 +69,10 @@ SECTIONS: dict[str, Section] = {
     "bench": Section(
         "Volumetric bodies: time and memory; winding numbers", ("1", "C.4"),
         ("core/bench.py", "core/bench_jobs.py", "core/bench_report.py", "core/meter.py"),
-        {"bench": "docs/bench_cpu.json"},
-        {"bench": "volsmpl bench --out docs/bench_cpu.json --markdown docs/bench_cpu.md"},
+        {"bench": "docs/bench_cpu.json", "bench_cuda": "docs/bench_cuda.json"},
+        {"bench": "volsmpl bench --out docs/bench_cpu.json --markdown docs/bench_cpu.md",
+         "bench_cuda": "volsmpl bench --device cuda --models volsmpl,volsmpl-dense,coap --batch 1 8 --repeats 10 "
+                       "--budget 5 --quick --no-bodybody --out docs/bench_cuda.json --markdown docs/bench_cuda.md"},
         rs.bench_section, (), _CKPTS),
     "selfpen": Section(
         "Self-intersection repair", ("6",), ("apps/selfpen",),

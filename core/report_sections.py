@@ -154,34 +154,38 @@ _BENCH_LABELS = {"volsmpl": "VolumetricSMPL (sparse)", "volsmpl-dense": "Volumet
 
 
 def bench_section(ctx) -> list[str]:
-    """Table 1 resources and Table C.4 from `volsmpl bench` (result 'bench')."""
-    d = ctx["results"].get("bench") or {}
+    """Table 1 resources and Table C.4 from `volsmpl bench` (results 'bench': the CPU run, 'bench_cuda': a GPU run)."""
+    runs = [(dev, ctx["results"].get(k) or {}) for dev, k in (("cpu", "bench"), ("cuda", "bench_cuda"))]
+    runs = [(dev, r) for dev, r in runs if r or dev == "cpu"]
+    d = runs[0][1]
     t1, c4 = paper_tables.TABLES["1"]["rows"], paper_tables.TABLES["C.4"]["rows"]
     rows, skipped = [], []
-    for m, r in (d.get("models") or {}).items():
-        for b, x in sorted((r.get("batches") or {}).items(), key=lambda kv: int(kv[0])):
-            mem = x.get("mem_bytes")
-            rows.append([f"ours: {_BENCH_LABELS.get(m, m)}", b, fmt(x.get("t_ms")), fmt(x.get("t_query_ms")),
-                         fmt(None if mem is None else mem / MIB) + " MiB", fmt((x.get("params") or 0) / 1e6 or None),
-                         x.get("mem_kind", "not recorded")])
-        skipped += [f"- {m}, B = {b}: {why}" for b, why in (r.get("skipped_batches") or {}).items()]
-        if r.get("status") not in (None, "ok"):
-            skipped.append(f"- {m}: {r.get('status')} {r.get('error', '')}".rstrip())
+    for dev, run in runs:
+        where = (run.get("meta") or {}).get("gpu") or (run.get("meta") or {}).get("cpu") or dev
+        for m, r in (run.get("models") or {}).items():
+            for b, x in sorted((r.get("batches") or {}).items(), key=lambda kv: int(kv[0])):
+                mem = x.get("mem_bytes")
+                rows.append([f"ours ({where}): {_BENCH_LABELS.get(m, m)}", b, fmt(x.get("t_ms")),
+                             fmt(x.get("t_query_ms")), fmt(None if mem is None else mem / MIB) + " MiB",
+                             fmt((x.get("params") or 0) / 1e6 or None), x.get("mem_kind", "not recorded")])
+            skipped += [f"- {dev}: {m}, B = {b}: {why}" for b, why in (r.get("skipped_batches") or {}).items()]
+            if r.get("status") not in (None, "ok"):
+                skipped.append(f"- {dev}: {m}: {r.get('status')} {r.get('error', '')}".rstrip())
     for k in ("volsmpl", "coap"):
         rows.append([f"paper: {paper_tables.TABLES['1']['row_labels'][k]}", "not stated", fmt_paper(t1[k]["t_ms"]), "-",
                      f"{fmt_paper(t1[k]['gpu_gb'])} GB", "-", "GPU memory"])
     out = [paper_caption("1") + " Time and memory of 60k query points.", ""]
     out += md_table(["row", "B", "t [ms]", "t query [ms]", "memory", "params [M]", "memory kind"], rows)
     out += ([""] + skipped if skipped else [])
-    ratios = d.get("ratios") or {}
     rr = []
     for pair, p_time, p_mem in (("coap/volsmpl", t1["coap"]["t_ms"] / t1["volsmpl"]["t_ms"],
                                  t1["coap"]["gpu_gb"] / t1["volsmpl"]["gpu_gb"]),
                                 ("winding/volsmpl", c4["winding"]["t_ms"] / c4["volsmpl"]["t_ms"],
                                  c4["winding"]["mem_gb"] / c4["volsmpl"]["mem_gb"])):
-        for b, x in (ratios.get(pair) or {}).items():
-            rr.append([f"{pair}, {'B = ' + b if b.isdigit() else b}", fmt(x.get("time")), fmt(x.get("time_query")),
-                       fmt(x.get("mem")), f"{p_time:.1f}", f"{p_mem:.1f}"])
+        for dev, run in runs:
+            for b, x in ((run.get("ratios") or {}).get(pair) or {}).items():
+                rr.append([f"{pair} ({dev}), {'B = ' + b if b.isdigit() else b}", fmt(x.get("time")),
+                           fmt(x.get("time_query")), fmt(x.get("mem")), f"{p_time:.1f}", f"{p_mem:.1f}"])
     if rr:
         out += ["", "Ratios within one run beside the paper's (Tables 1 and C.4):", ""]
         out += md_table(["ratio", "time", "time (cached encoding)", "memory", "paper time", "paper memory"], rr)
@@ -202,8 +206,9 @@ def bench_section(ctx) -> list[str]:
         out += ["", "Accuracy in the same run: " + ", ".join(
             f"{m} IoU mean {fmt((a.get('metrics') or {}).get('iou_mean', 0) * 100)} % ({a.get('status')})"
             for m, a in acc.items()) + "."]
-    if d.get("notes"):
-        out += ["", "Notes of the run:", ""] + [f"- {n}" for n in d["notes"]]
+    for dev, run in runs:
+        if run.get("notes"):
+            out += ["", f"Notes of the {dev} run:", ""] + [f"- {n}" for n in run["notes"]]
     return out
 
 

@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# The GPU checklist, run on a lent device machine (a bare image with CUDA torch and no open3d) from the repo root:
+#     tools/gpu_checks.sh checks             # cuda-marked tests and selfpen on CUDA
+#     tools/gpu_checks.sh bench              # `volsmpl bench --device cuda` (B = 1, 8; 60k points)
+#     tools/gpu_checks.sh apps               # hoi and motion CLIs on CUDA (small sets: costs and that they run)
+#     tools/gpu_checks.sh train SRC SECONDS  # resume the training run folder SRC on CUDA for about SECONDS
+# e.g. SOURCE_COMMIT=<commit> bash tools/gpu_checks.sh train checkpoints/coap_pp 540 (one call; the run's latest
+# checkpoint comes back as $OUT/run.tar: unpack it over checkpoints/coap_pp/ and commit it).
+# Make the command end inside the call's 600 s: a run killed by the call's limit returns nothing.
+# Needs: the pure-Python wheels missing there in .whl/ (trimesh, kornia, kornia_rs; see the device README) and
+# SOURCE_COMMIT=<commit> in the environment (results record it). Everything it makes lands in $OUT (default
+# out/gpu) as a few files: logs, JSON, and one tarball per step (only 8 files, 2 folders deep, come back).
+set -uo pipefail
+OUT=${OUT:-out/gpu}
+mkdir -p "$OUT"
+W=/tmp/gpuwork
+mkdir -p "$W"
+
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
+rm -rf /tmp/pk && mkdir -p /tmp/pk && cp -r core /tmp/pk/volsmpl && cp -r apps /tmp/pk/volsmpl/apps
+echo "${SOURCE_COMMIT:-unknown}" > /tmp/pk/volsmpl/SOURCE_COMMIT
+export PYTHONPATH=/tmp/pk:/tmp/site PYTHONUNBUFFERED=1
+V="python3 -m volsmpl.cli"
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
+python3 -c "import torch, volsmpl; print('torch', torch.__version__, torch.cuda.get_device_name())" || exit 1
+
+step() {  # step NAME TIMEOUT CMD...: run with a wall-clock limit, log to $W/NAME.log, report its time and status
+    local name=$1 limit=$2; shift 2
+    local t0=$SECONDS
+    timeout "$limit" "$@" > "$W/$name.log" 2>&1
+    local rc=$?
+    echo "== $name: rc $rc in $((SECONDS - t0)) s (limit $limit)"
+    tail -n 25 "$W/$name.log"
+}
+
+case "${1:-}" in
+checks)
+    step pytest_cuda 170 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
+        tests/test_egohmr_app.py tests/test_groundtruth.py tests/test_partition.py tests/test_train.py tests/test_train_state.py
+    step selfpen_cuda 120 $V selfpen --device cuda --model volsmpl,coap,mesh --render 2 --out "$W/selfpen"
+    cp "$W"/*.log "$OUT"/ 2>/dev/null
+    tar czf "$OUT/checks.tgz" -C "$W" . ;;
+bench)  # each (model, batch) runs in a fresh process (~20 s with CUDA start and profiling): keep the set small
+    step bench_cuda 240 $V bench --device cuda --models volsmpl,volsmpl-dense,coap --batch 1 8 --points 60000 \
+        --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
+    cp "$W/bench_cuda.log" "$OUT"/ ;;
+apps)  # the interaction database is built on the CPU side of that machine first (no open3d needed)
+    step hoi_make_db 150 $V hoi make-db --seed 0
+    step hoi_cuda 150 $V hoi --device cuda --model volsmpl,coap,mesh --cases 4 --render 1 --out "$W/hoi"
+    step hoi_cuda_b4 100 $V hoi --device cuda --model volsmpl,coap,mesh --cases 4 --batch 4 --render 0 --out "$W/hoi_b4"
+    step motion_cuda 200 $V motion --device cuda --model volsmpl,coap,mesh --scenes 1 --sequences 1 --render 1 \
+        --out "$W/motion"
+    tar czf "$OUT/apps.tgz" -C "$W" . ;;
+train)
+    src=${2:?usage: tools/gpu_checks.sh train SRC SECONDS}; secs=${3:?seconds}
+    run=/tmp/runs/$(basename "$src"); rm -rf "$run"; mkdir -p /tmp/runs; cp -r "$src" "$run"
+    end=$((SECONDS + secs))
+    step train_probe 300 $V train --resume --out "$run" --device cuda --max-steps 20
+    sps=$(tail -n 1 "$run/log.csv" | cut -d, -f6)
+    # 0.8: the step time drifts (0.22 -> 0.29 s over one session's chunks); the limit keeps the tarball below
+    n=$(python3 -c "print(max(0, int(0.8 * ($end - $SECONDS - 40) / max(float('$sps'), 1e-3))))")
+    echo "== $sps s/step over the probe's last window: $n more steps"
+    [ "$n" -gt 0 ] && step train $((end - SECONDS > 1 ? end - SECONDS : 1)) $V train --resume --out "$run" --device cuda \
+        --max-steps "$n"
+    latest=$(cat "$run/latest")
+    cp "$run/log.csv" "$W"/*.log "$OUT"/
+    tar cf "$OUT/run.tar" -C "$run" "$latest" config.json log.csv latest ;;
+*)
+    echo "usage: tools/gpu_checks.sh checks|bench|apps|train SRC SECONDS" >&2; exit 2 ;;
+esac
