@@ -151,6 +151,34 @@ def test_decode_pairs_nograd_tiled_path_equals_grad_path(monkeypatch):
     torch.testing.assert_close(y_tiled, y_grad.detach())
 
 
+def test_decode_pairs_on_a_gpu_runs_untiled_with_operator_calls_independent_of_b(monkeypatch):
+    """On a GPU the no-grad path has no cache tiles: one batched matmul per layer whatever B (operator calls
+    counted by the profiler), values equal to the CPU's tiled path."""
+    from volsmpl.bench_jobs import profile_query
+
+    m = _tiny(K=3)
+    assert m.tile_rows("cpu") == NBWDecoder.TILE_ROWS and m.tile_rows("cuda") is None
+    monkeypatch.setattr(NBWDecoder, "TILE_ROWS", 40)
+
+    def calls(B, tiles):
+        g = torch.Generator().manual_seed(B)
+        z = torch.randn(B, 3, 5, dtype=torch.float64, generator=g)
+        x = torch.randn(300 * B, 3, dtype=torch.float64, generator=g)
+        bi = torch.arange(B).repeat_interleave(300)
+        pi = torch.randint(0, 3, (300 * B,), generator=g)
+        with torch.no_grad():
+            gen = m.generate(z)
+            monkeypatch.setattr(NBWDecoder, "tile_rows", lambda self, d: 40 if tiles else None)
+            y = m.decode_pairs(x, bi, pi, gen, chunk=16)
+            n = profile_query(lambda: m.decode_pairs(x, bi, pi, gen, chunk=16), runs=1)["ops_per_query"]
+            monkeypatch.setattr(NBWDecoder, "tile_rows", lambda self, d: 40)
+            torch.testing.assert_close(y, m.decode_pairs(x, bi, pi, gen, chunk=16))
+        return n
+
+    assert calls(1, tiles=False) == calls(8, tiles=False)
+    assert calls(8, tiles=True) > calls(1, tiles=True)  # the CPU's tiles: the count grows with the pairs
+
+
 def test_decode_pairs_gradcheck():
     m = _tiny(K=3)
     g = torch.Generator().manual_seed(4)

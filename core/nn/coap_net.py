@@ -337,11 +337,12 @@ class CoapNet(nn.Module):
 
     def _run(self, x: torch.Tensor, group: torch.Tensor, tabs: List[torch.Tensor],
              flag: Optional[torch.Tensor]) -> torch.Tensor:
-        """:meth:`_rows` then sigmoid(-o); tiled over rows when no gradient is needed."""
+        """:meth:`_rows` then sigmoid(-o); tiled over rows when no gradient is needed on the CPU (a GPU gains
+        nothing from cache tiles and pays a launch per tile)."""
         R = x.shape[0]
         needs_grad = torch.is_grad_enabled() and (
             x.requires_grad or any(t.requires_grad for t in tabs) or any(p.requires_grad for p in self.parameters()))
-        if needs_grad or R <= self.TILE_ROWS:
+        if needs_grad or R <= self.TILE_ROWS or x.device.type != "cpu":
             return torch.sigmoid(-self._rows(x, group, tabs, flag))
         out = x.new_empty(R)
         for s in range(0, R, self.TILE_ROWS):

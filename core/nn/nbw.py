@@ -361,11 +361,12 @@ class NBWDecoder(nn.Module):
         bs = [gen.biases[l].reshape(G, 1, self.out_dims[l])[lay.chunk_group] for l in range(self.n_layers)]
         needs_grad = torch.is_grad_enabled() and (
             x_local.requires_grad or any(w.requires_grad for w in Ws) or any(b.requires_grad for b in bs))
-        if needs_grad:
+        tile_rows = self.tile_rows(x_local.device)
+        if needs_grad or tile_rows is None:
             h = self._mlp_chunks(xs, Ws, bs)
         else:
-            # Inference: run all layers tile by tile so activations stay in cache and buffers are reused.
-            tile = max(1, self.TILE_ROWS // lay.chunk)
+            # Inference on the CPU: run all layers tile by tile so activations stay in cache and buffers are reused.
+            tile = max(1, tile_rows // lay.chunk)
             h = xs.new_empty(n_chunks, lay.chunk, self.out_dim)
             for s in range(0, n_chunks, tile):
                 e = min(n_chunks, s + tile)
@@ -373,7 +374,14 @@ class NBWDecoder(nn.Module):
         h = h.reshape(n_chunks * lay.chunk, self.out_dim)[lay.slot]
         return h.squeeze(-1) if self.out_dim == 1 else h
 
-    TILE_ROWS = 8192  # rows per cache tile on the no-grad path of decode_pairs
+    TILE_ROWS = 8192  # rows per cache tile on the no-grad path of decode_pairs (CPU)
+
+    def tile_rows(self, device) -> Optional[int]:
+        """Rows per cache tile of `decode_pairs` without gradients: TILE_ROWS on the CPU (activations stay in
+        cache), None on a GPU: every chunk in one batched matmul per layer, since a loop over tiles there only
+        multiplies the kernel launches (the operator calls of a query grew with B: 447 at B = 1, 2,586 at B = 8
+        on an H100 at 70cf9e6, docs/bench_cuda.md)."""
+        return self.TILE_ROWS if torch.device(device).type == "cpu" else None
 
     # ------------------------------------------------------------------ grouped decoding (volsmpl.nn.grouped)
     def grouped_supported(self, dtype: torch.dtype, device=None) -> bool:
