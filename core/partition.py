@@ -117,6 +117,9 @@ class Partition(torch.nn.Module):
         self.register_buffer("collision_mask", torch.as_tensor(self.table.collision_mask.copy()), persistent=False)
         tv, _ = _pad_index_lists([np.nonzero(vlab == k)[0] for k in range(K)], fill_first=True)
         self.register_buffer("tight_vertices", tv, persistent=False)
+        # every vertex in exactly one part: the vertices sorted by part, and each part's count (`boxes`)
+        self.register_buffer("_by_part", torch.as_tensor(np.argsort(vlab, kind="stable")), persistent=False)
+        self.part_vertex_counts = np.bincount(vlab, minlength=K).tolist()
         pad_t, mask_t = _pad_index_lists(self.tight_face_ids, fill_first=False)
         pad_e, mask_e = _pad_index_lists(self.extended_face_ids, fill_first=False)
         self.register_buffer("_tight_pad", pad_t, persistent=False)
@@ -184,10 +187,15 @@ class Partition(torch.nn.Module):
 
         Args: vertices (B, V, 3) posed; G (B, K, 4, 4). Returns box_min, box_max: (B, K, 3).
         """
-        B, K = G.shape[:2]
-        pv = vertices[:, self.tight_vertices.reshape(-1)].reshape(B, K, -1, 3)
-        local = self.to_part_frames(pv, G)
-        lo, hi = local.amin(dim=2), local.amax(dim=2)
+        R, t = G[..., :3, :3], G[..., :3, 3]
+        lo, hi = [], []
+        # part by part over the vertices sorted by part: a (B, K, Vmax) padded gather costs 5x the work
+        # (Vmax = 4,319 of 13,348 vertices on the default body) and its backward more
+        for k, v in enumerate(vertices[:, self._by_part].split(self.part_vertex_counts, dim=1)):
+            local = (v - t[:, k, None]) @ R[:, k]                         # (B, n_k, 3): R_k^T (x - t_k)
+            lo.append(local.amin(dim=1))
+            hi.append(local.amax(dim=1))
+        lo, hi = torch.stack(lo, dim=1), torch.stack(hi, dim=1)
         center, half = 0.5 * (lo + hi), 0.5 * (hi - lo) * (1.0 + self.box_padding)
         return center - half, center + half
 

@@ -70,6 +70,7 @@ def test_boxes_contain_part_vertices(body, part):
         # padding: tight extent grows by exactly 12.5 %
         tight = lv.amax(1) - lv.amin(1)
         assert torch.allclose(bmax[:, k] - bmin[:, k], tight * 1.125, atol=1e-5)
+        assert torch.allclose(bmax[:, k] + bmin[:, k], lv.amax(1) + lv.amin(1), atol=1e-5)  # centred on the tight box
 
 
 def test_surface_samples_on_mesh(body, part):
