@@ -156,6 +156,27 @@ def test_user_scene_and_bad_inputs(tmp_path):
         O.SceneCollision(volsmpl.attach_volume(volsmpl.create_body(), model="mesh"), np.zeros((0, 3)))
 
 
+@pytest.mark.parametrize("kind", ["coap", "volsmpl"])
+def test_published_collision_term_equals_the_culled_one(body, short_walk, kind):
+    """COAP as published (every part at every point, synth.published_penetration, for the --published-cost
+    column) computes the same term as the culled collision_loss: values and vertex gradients."""
+    from volsmpl.apps.motion.synth import published_penetration
+    x_wall = float(short_walk.joints[0, :, 0, 0].mean()) + 0.12
+    pts = torch.as_tensor(np.concatenate([_wall(x_wall, 0.04), _wall(2.0, 0.08)]))
+    base = O.walk_output(short_walk, torch.tensor([0, 9]))
+    res = []
+    for vol, fn in ((volsmpl.attach_volume(body, model=kind, dense=True), published_penetration),
+                    (volsmpl.attach_volume(body, model=kind), lambda v, o, p: v.collision_loss(o, p, reduction="sum"))):
+        v = base.vertices.detach().clone().requires_grad_(True)
+        out = type(base)(vertices=v, joints=base.joints.detach(), full_pose=base.full_pose.detach())
+        val = fn(vol, out, pts)
+        val.sum().backward()
+        res.append((val.detach(), v.grad))
+    (a, ga), (b, gb) = res
+    assert (a > 0).all() and torch.allclose(a, b, rtol=1e-4, atol=1e-6)
+    assert torch.allclose(ga, gb, rtol=1e-3, atol=1e-5)
+
+
 def test_cli_errors_are_one_line(tmp_path, capsys):
     from volsmpl.cli import main
     path = _user_scene(tmp_path)
@@ -163,7 +184,8 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     cases = [(["--frames", "1"], "frames must be"),
              (["--scene", str(path), "--up", "z", "--units", "cm", "--start", "0,0", "--goal", "150,0"], "inside an obstacle"),
              (["--scene", str(path), "--up", "z", "--units", "cm", "--start=-150,0", "--goal=900,0"], "off the floor"),
-             (["--w", "mesh=x"], "weights must be numbers")]
+             (["--w", "mesh=x"], "weights must be numbers"),
+             (["--published-cost"], "add coap to --model")]
     for extra, msg in cases:
         assert main(["motion", "--model", "mesh", "--out", out] + extra) == 2
         err = capsys.readouterr().err.strip()
@@ -177,9 +199,12 @@ def test_end_to_end_every_model(tmp_path):
     out = tmp_path / "motion"
     rc = main(["motion", "--model", "volsmpl,coap,mesh", "--w", "coap=0.1", "--scenes", "1", "--sequences", "1",
                "--frames", "10", "--iters", "2", "--cost-frames", "1", "--cost-repeats", "1", "--render", "1",
-               "--out", str(out)])
+               "--published-cost", "--out", str(out)])
     assert rc == 0
     d = json.loads((out / "results.json").read_text())
+    pub = d["summary"]["coap_published"]   # cost only; COAP as published does more work than our culled COAP
+    assert pub["n_sequences"] == 0 and pub["ms_per_frame_fwd"] > 0 and pub["mem_per_frame_mb"] > 0
+    assert pub["mem_per_frame_fwdbwd_mb"] > d["summary"]["coap"]["mem_per_frame_fwdbwd_mb"]
     for key in ("volsmpl", "coap", "mesh", "coap_w0.1", "volsmpl_w1.0"):
         s = d["summary"][key]
         for k in ("mem_per_frame_mb", "ms_per_frame_fwd", "ms_per_frame_fwdbwd", "total_mem_mb", "max_frames_in_budget",

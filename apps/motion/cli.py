@@ -28,6 +28,7 @@ import torch
 PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
 TABLE5_COAP_W = 0.1     # Table 5's COAP row is D.1's w = 0.1 row
 ALL_SCENES = 15
+PUBLISHED = "coap_published"   # summary/cost key of COAP as published (--published-cost)
 
 
 def add_parser(sub):
@@ -62,6 +63,9 @@ def add_parser(sub):
                    help="keep the floor points in the optimised collision term (slow on a CPU; metrics always count them)")
     p.add_argument("--cost-frames", type=int, default=8, help="frames batched in the per-frame cost measurement")
     p.add_argument("--cost-repeats", type=int, default=3, help="repeats of the cost measurement (median)")
+    p.add_argument("--published-cost", action="store_true",
+                   help="with coap: also the per-frame cost of COAP as published (every part at every scene point, "
+                        "no culling), on one frame (GBs of memory): summary row 'coap_published', cost only")
     p.add_argument("--render", type=int, default=1, help="frame strips of the first N sequences per scene (0: none)")
     p.add_argument("--out", default="out/motion", help="output folder")
     p.add_argument("--resume", action="store_true",
@@ -154,7 +158,7 @@ def run(args) -> int:
     from . import walk as W
     from .figures import topdown
     from .scenes import check_endpoint, floor_xz, load_scene, room_scenes
-    from .synth import SynthConfig, check_frames, measure_cost, synthesize
+    from .synth import SynthConfig, check_frames, measure_cost, published_penetration, synthesize
 
     out = check_writable(args.out, "dir", "--out")
     models = parse_models(args.model)
@@ -169,6 +173,8 @@ def run(args) -> int:
     cf = str(args.coll_frames).strip().lower()
     if cf not in ("auto", "all") and not (cf.isdigit() and int(cf) >= 1):
         raise ValueError(f"--coll-frames must be 'auto', 'all' or a number >= 1, got {args.coll_frames!r}")
+    if args.published_cost and "coap" not in models:
+        raise ValueError("--published-cost measures COAP as published: add coap to --model")
     if args.device == "cuda" and not torch.cuda.is_available():
         raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
     if args.threads:
@@ -213,6 +219,17 @@ def run(args) -> int:
               f"{costs[m]['ms_per_frame_fwdbwd']:.1f} ms fwd+bwd, {costs[m]['mem_per_frame_fwd_mb']:.1f} MB fwd, "
               f"{costs[m]['mem_per_frame_fwdbwd_mb']:.1f} MB fwd+bwd; {costs[m]['max_frames_in_budget']} frames fit "
               f"{args.mem_budget_gb:g} GB -> collision on {coll_frames[m]} frames")
+    if args.published_cost:  # COAP's own code: every part at every point, the same values (cost only)
+        pub = volsmpl.attach_volume(body, model="coap", dense=True).to(args.device)
+        costs[PUBLISHED] = c = measure_cost(pub, probe, sc0.points, frames=1, repeats=args.cost_repeats,
+                                            device=args.device, loss=published_penetration)
+        fb = c["mem_per_frame_fwdbwd_mb"] * 2 ** 20
+        c["max_frames_in_budget"] = int(budget // fb) if fb > 0 else None
+        print(f"{'coap as published':8s} collision term per frame: {c['ms_per_frame_fwd']:.1f} ms fwd, "
+              f"{c['ms_per_frame_fwdbwd']:.1f} ms fwd+bwd, {c['mem_per_frame_fwd_mb']:.1f} MB fwd, "
+              f"{c['mem_per_frame_fwdbwd_mb']:.1f} MB fwd+bwd; {c['max_frames_in_budget']} frames fit "
+              f"{args.mem_budget_gb:g} GB")
+        del pub
 
     records = {(m, w): [] for m in models for w in weights[m]}
     cases = []
@@ -261,6 +278,14 @@ def run(args) -> int:
             summary[_wkey(m, w)] = dict(s)
     if "coap" not in summary and "coap" in models:   # a sweep without 0.1: Table 5's row is its first weight
         summary["coap"] = dict(summary[_wkey("coap", weights["coap"][0])])
+    if PUBLISHED in costs:   # cost columns only: its optimisation would be the 'coap' rows' (same values)
+        c = costs[PUBLISHED]
+        summary[PUBLISHED] = {"mem_per_frame_mb": c["mem_per_frame_fwd_mb"],
+                              "mem_per_frame_fwdbwd_mb": c["mem_per_frame_fwdbwd_mb"],
+                              "ms_per_frame_fwd": c["ms_per_frame_fwd"], "ms_per_frame_fwdbwd": c["ms_per_frame_fwdbwd"],
+                              "max_frames_in_budget": c["max_frames_in_budget"], "memory_kind": c["memory_kind"],
+                              "frame_mem_gb": c["mem_per_frame_fwd_mb"] / 1024, "frame_ms": c["ms_per_frame_fwd"],
+                              "n_sequences": 0}
     print()
     print(format_table(summary))
     print("per-frame cost: the collision term on the full cloud (" + ", ".join(sorted({c["memory_kind"] for c in costs.values()}))

@@ -172,11 +172,23 @@ def evaluate(walk: W.Walk, faces, scene, goal) -> dict:
     }
 
 
-def measure_cost(volume, walk: W.Walk, points, frames: int = 8, repeats: int = 3, device="cpu") -> dict:
+def published_penetration(volume, out, points: torch.Tensor) -> torch.Tensor:
+    """The collision term as COAP's published code computes it: every part's decoder at every scene point (no
+    culling by boxes or body bounds; a `dense` volume masks the parts whose box does not hold the point), the
+    penetration summed per body. Same values as `volume.collision_loss(out, points, 'sum')`, far more work.
+
+    Shape: out with B bodies, points (N, 3) -> (B,).
+    """
+    B = out.vertices.shape[0]
+    return volume.penetration(volume.query(out, points.expand(B, -1, -1), dense=True)).sum(dim=1)
+
+
+def measure_cost(volume, walk: W.Walk, points, frames: int = 8, repeats: int = 3, device="cpu", loss=None) -> dict:
     """Per-frame time and peak memory of the collision term on the full cloud (the paper's per-frame figures):
-    `frames` evenly spaced frames of `walk` batched through `volume.collision_loss(out, points, 'sum')`, forward
-    alone (autograd on: the graph an optimisation keeps) and forward + backward (to the vertices, joints and pose),
-    the median of `repeats` runs after a warm-up, divided by the frames."""
+    `frames` evenly spaced frames of `walk` batched through `volume.collision_loss(out, points, 'sum')` (or
+    `loss(volume, out, points)` -> (B,), e.g. `published_penetration`), forward alone (autograd on: the graph an
+    optimisation keeps) and forward + backward (to the vertices, joints and pose), the median of `repeats` runs
+    after a warm-up, divided by the frames."""
     T = walk.body_pose.shape[1]
     rows = torch.as_tensor(np.unique(np.round(np.linspace(0, T - 1, min(frames, T))).astype(int)))
     base = walk_output(walk, rows)
@@ -189,6 +201,8 @@ def measure_cost(volume, walk: W.Walk, points, frames: int = 8, repeats: int = 3
                                   for k in ("vertices", "joints", "full_pose")})
 
     def fwd():
+        if loss is not None:
+            return loss(volume, leaf(), P).sum()
         return volume.collision_loss(leaf(), P, reduction="sum").sum()
 
     def fwdbwd():
