@@ -11,6 +11,8 @@ import os
 import sys
 import traceback
 
+from .deps import MissingDependency
+
 # subcommand name -> (module providing add_parser(subparsers) and run(args), one-line summary for --help)
 SUBCOMMANDS = {
     "bench": ("volsmpl.bench", "time / memory / accuracy benchmark: VolumetricSMPL vs COAP vs winding numbers"),
@@ -42,8 +44,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-#: exceptions a user can cause (bad arguments, inputs, paths, environment): exit 2, the message is the fix
-USER_ERRORS = (ValueError, TypeError, OSError, RuntimeError)
+#: exceptions a user can cause (bad arguments, inputs, paths, environment, a missing package): exit 2, the
+#: message is the fix
+USER_ERRORS = (ValueError, TypeError, OSError, RuntimeError, MissingDependency)
 
 
 def _one_line(e: BaseException) -> str:

@@ -241,13 +241,8 @@ def _winding_direct(tri: torch.Tensor, p: torch.Tensor) -> torch.Tensor:
 
 # ---------------------------------------------------------------------------------------------- open3d scene
 def _open3d():
-    try:
-        import open3d as o3d
-    except ImportError as e:  # the wheel links libusb; slim images lack it
-        hint = " Install the system library: apt-get install libusb-1.0-0." if "libusb" in str(e) else \
-            " Install it with: pip install 'open3d>=0.18'."
-        raise ImportError(f"volsmpl.groundtruth needs open3d for exact mesh distances, but importing it failed: {e}.{hint}") from e
-    return o3d
+    from .deps import open3d
+    return open3d("volsmpl.groundtruth's exact mesh distances (open3d backend)")
 
 
 def raycasting_scene(vertices, faces):

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from volsmpl.deps import open3d
 from volsmpl.mesh_distance import winding_numbers
 
 
@@ -57,7 +58,7 @@ def collision_ratio(vertices: torch.Tensor, faces: torch.Tensor, points: torch.T
 def contact(vertices: np.ndarray, scenes: list, threshold: float = 0.02) -> np.ndarray:
     """Whether some body vertex is within `threshold` metres of the scene mesh or inside one of its closed
     components. Shape: vertices (B, V, 3), scenes: B trimesh meshes -> (B,) bool."""
-    import open3d as o3d
+    o3d = open3d("the egohmr contact metric")
 
     out = np.zeros(len(vertices), dtype=bool)
     for b, mesh in enumerate(scenes):

@@ -13,6 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from volsmpl.deps import open3d
 from volsmpl.groundtruth import raycasting_scene
 from volsmpl.scene import cached, make_room, sample_surface
 
@@ -66,7 +67,7 @@ _RAY_DIRS /= np.linalg.norm(_RAY_DIRS, axis=1, keepdims=True)
 def _winding(scene, normals: np.ndarray, p: np.ndarray) -> np.ndarray:
     """(N,) integer winding numbers of p (N, 3) w.r.t. the closed mesh in an open3d scene (face normals (F, 3)):
     signed crossings along 3 fixed rays, median (as volsmpl.groundtruth.ray_winding_number, on a prebuilt scene)."""
-    import open3d as o3d
+    o3d = open3d("the egohmr room checks (ray casts and distances)")
     o = np.ascontiguousarray(p, dtype=np.float32)
     per_ray = []
     for d in _RAY_DIRS:
@@ -92,7 +93,7 @@ class BodyMesh:
         ins = _winding(self.scene, self.normals, p) >= 1
         if not ins.any():
             return 0.0
-        import open3d as o3d
+        o3d = open3d("the egohmr room checks (penetration depth)")
         return float(self.scene.compute_distance(o3d.core.Tensor(p[ins].astype(np.float32))).numpy().max())
 
 
@@ -121,7 +122,7 @@ class RoomSolids:
                 continue
             ins = q[winding_number(mesh.vertices, mesh.faces, q) > 0.5]
             if len(ins):
-                import open3d as o3d
+                o3d = open3d("the egohmr room checks (penetration depth)")
                 if k not in self._scenes:
                     self._scenes[k] = raycasting_scene(mesh.vertices, mesh.faces)
                 dist = self._scenes[k].compute_distance(o3d.core.Tensor(ins.astype(np.float32))).numpy()
@@ -167,7 +168,7 @@ def penetration(vertices: np.ndarray, faces: np.ndarray, room, cloud: np.ndarray
 
 def surface_distance(points: np.ndarray, mesh) -> float:
     """Smallest distance (m) from points (N, 3) to a triangle mesh (open3d BVH)."""
-    import open3d as o3d
+    o3d = open3d("the egohmr room checks (ray casts and distances)")
     q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
     return float(raycasting_scene(mesh.vertices, mesh.faces).compute_distance(q).numpy().min())
 

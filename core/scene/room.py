@@ -290,7 +290,8 @@ class Room:
                          f"distance range or lower the clearance.")
 
     def _line_of_sight(self, eye: np.ndarray, target: np.ndarray, slack: float = 0.25) -> bool:
-        import open3d as o3d
+        from ..deps import open3d
+        o3d = open3d("the room's line-of-sight test (camera placement)")
 
         if "rays" not in self._cache:
             m = self.mesh()

@@ -1,0 +1,36 @@
+"""Missing heavy packages (volsmpl.deps): one error naming the feature and the fix, reported by the CLI as a user
+error (one line, exit 2), on a real path that needs open3d (a room's line-of-sight test)."""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+from volsmpl.deps import MissingDependency, open3d
+
+
+def test_open3d_missing_names_the_feature_and_the_fix(monkeypatch):
+    monkeypatch.setitem(sys.modules, "open3d", None)  # `import open3d` raises ImportError
+    with pytest.raises(MissingDependency, match=r"the test feature needs open3d.*pip install 'open3d>=0\.18'"):
+        open3d("the test feature")
+    assert issubclass(MissingDependency, ImportError)  # callers catching ImportError still do
+
+
+def test_a_room_without_open3d_fails_in_one_line_at_the_cli(monkeypatch, capsys):
+    from volsmpl.apps.motion import cli as motion_cli
+    from volsmpl.cli import main
+    from volsmpl.scene import make_room
+
+    room = make_room(0)
+    monkeypatch.setitem(sys.modules, "open3d", None)
+
+    def run(args):  # a subcommand that places a camera in a room (occlusion test by ray casting)
+        room.sample_viewpoint(np.asarray(room.bounds).mean(axis=0), seed=1)
+        return 0
+
+    monkeypatch.setattr(motion_cli, "run", run)
+    assert main(["motion"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("volsmpl motion: error: ") and "line-of-sight" in err and "pip install" in err
+    assert "\n" not in err and "internal error" not in err
