@@ -185,11 +185,30 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
              (["--scene", str(path), "--up", "z", "--units", "cm", "--start", "0,0", "--goal", "150,0"], "inside an obstacle"),
              (["--scene", str(path), "--up", "z", "--units", "cm", "--start=-150,0", "--goal=900,0"], "off the floor"),
              (["--w", "mesh=x"], "weights must be numbers"),
-             (["--published-cost"], "add coap to --model")]
+             (["--published-cost"], "add coap to --model"),
+             (["--batch", "0"], "--batch must be >= 1")]
     for extra, msg in cases:
         assert main(["motion", "--model", "mesh", "--out", out] + extra) == 2
         err = capsys.readouterr().err.strip()
         assert msg in err and "\n" not in err
+
+
+@pytest.mark.parametrize("kind", ["volsmpl", "mesh"])
+def test_pairs_optimised_together_end_where_each_ends_alone(body, walk_model, kind):
+    """synthesize_batch (the CLI's --batch) on two pairs of a room: each walk equals its own synthesize run."""
+    from volsmpl.apps.motion.synth import SynthConfig, synthesize, synthesize_batch
+    sc = S.room_scenes(1, 2, 10)[0]
+    vol = volsmpl.attach_volume(body, model=kind)
+    cfg = SynthConfig(frames=10, iters=4)
+    both = synthesize_batch(walk_model, vol, sc, sc.pairs[:2], 1.0, cfg)
+    for (s, g), r in zip(sc.pairs[:2], both):
+        alone = synthesize(walk_model, vol, sc, s, g, 1.0, cfg)
+        assert torch.allclose(r["walk"].joints, alone["walk"].joints, atol=1e-4)
+        assert r["metrics"]["goal_dist_m"] == pytest.approx(alone["metrics"]["goal_dist_m"], abs=1e-4)
+        assert r["metrics"]["collision_cm"] == pytest.approx(alone["metrics"]["collision_cm"], abs=1e-3)
+        assert r["metrics"]["batch"] == 2 and alone["metrics"]["batch"] == 1
+        assert r["records"][0] != r["records"][-1]  # the walk was optimised
+    assert not torch.allclose(both[0]["walk"].joints, both[1]["walk"].joints)  # two different walks
 
 
 # ------------------------------------------------------------------------------------------------ end to end

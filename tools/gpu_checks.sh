@@ -49,7 +49,9 @@ apps)  # the interaction database is built on the CPU side of that machine first
     step hoi_cuda 150 $V hoi --device cuda --model volsmpl,coap,mesh --cases 4 --render 1 --out "$W/hoi"
     step hoi_cuda_b4 100 $V hoi --device cuda --model volsmpl,coap,mesh --cases 4 --batch 4 --render 0 --out "$W/hoi_b4"
     step motion_cuda 200 $V motion --device cuda --model volsmpl,coap,mesh --scenes 1 --sequences 1 --render 1 \
-        --out "$W/motion"
+        --published-cost --out "$W/motion"
+    step motion_cuda_b8 200 $V motion --device cuda --model volsmpl,coap,mesh --w coap=0.1 --scenes 1 --sequences 8 \
+        --batch 8 --render 0 --out "$W/motion_b8"
     tar czf "$OUT/apps.tgz" -C "$W" . ;;
 train)
     src=${2:?usage: tools/gpu_checks.sh train SRC SECONDS}; secs=${3:?seconds}

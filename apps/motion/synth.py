@@ -88,16 +88,33 @@ def synthesize(model: W.WalkModel, volume, scene, start, goal, w: float = 1.0, c
     Returns {'walk': the final Walk (detached), 'metrics': evaluate(...), 'optim': the harness summary,
     'collision_frames': the evaluated frames, 'records': per-step totals}.
     """
+    return synthesize_batch(model, volume, scene, [(start, goal)], w, cfg, progress)[0]
+
+
+def synthesize_batch(model: W.WalkModel, volume, scene, pairs, w: float = 1.0, cfg: SynthConfig | None = None,
+                     progress: bool | None = False) -> list:
+    """Optimise the walks of several (start, goal) pairs of one scene in one run of the harness: each walk keeps
+    its own objective, unit-length gradient and Adam moments (volsmpl.optim's problems), while the collision term
+    culls and groups the frames of all walks together (on a GPU: one large query instead of many small ones).
+    Each result is `synthesize`'s for its pair, up to float rounding; `metrics` adds 'batch' (the pairs optimised
+    together), and with more than one pair 'optim_s' is the run's wall time shared equally and 'optim_peak_mem_mb'
+    the run's peak (all walks).
+    """
     cfg = cfg or SynthConfig()
     T = check_frames(cfg.frames)
+    pairs = list(pairs)
+    if not pairs:
+        raise ValueError("synthesize_batch needs at least one (start, goal) pair")
     like = model.body.v_template
-    init = initial_controls(start, goal, T, like.dtype, like.device)
-    goal_t = torch.as_tensor(np.asarray(goal, float)[None], dtype=like.dtype, device=like.device)
+    inits = [initial_controls(s, g, T, like.dtype, like.device) for s, g in pairs]
+    init = {k: torch.cat([i[k] for i in inits]) for k in inits[0]}
+    B = len(pairs)
+    goal_t = torch.as_tensor(np.asarray([g for _, g in pairs], float), dtype=like.dtype, device=like.device)
     pts = scene.points if cfg.floor_in_loss else scene.points[~scene.floor]
     coll = SceneCollision(volume, pts if len(pts) else scene.points[:1] * 0 + 1e3, cfg.coll_frames)
     variables = {"heading_delta": Variable(init["heading_delta"]), "speed_u": Variable(init["speed_u"])}
     if cfg.residuals:
-        variables["residual"] = Variable(torch.zeros(1, T, 69, dtype=like.dtype, device=like.device), lr=cfg.residual_lr)
+        variables["residual"] = Variable(torch.zeros(B, T, 69, dtype=like.dtype, device=like.device), lr=cfg.residual_lr)
 
     def prepare(s):
         return {"walk": model(s.heading_delta, speed_of_control(s.speed_u), s.get("residual"), frames=T, start=init["start"],
@@ -115,16 +132,20 @@ def synthesize(model: W.WalkModel, volume, scene, start, goal, w: float = 1.0, c
     wall = time.perf_counter() - t0
     v = res.variables
     with torch.no_grad():
-        walk = model(v["heading_delta"], speed_of_control(v["speed_u"]), v.get("residual"), frames=T, start=init["start"],
-                     heading0=init["heading0"])
-    metrics = evaluate(walk, model.body.faces, scene, goal)
+        walks = model(v["heading_delta"], speed_of_control(v["speed_u"]), v.get("residual"), frames=T,
+                      start=init["start"], heading0=init["heading0"])
     summ = res.summary()
-    metrics.update({"iterations": res.iterations[0], "optim_s": wall, "ms_per_iter": summ["ms_per_iter"],
-                    "optim_peak_mem_mb": summ["peak_mem_mb"], "memory_kind": summ["memory_kind"],
-                    "final_terms": {k: vv[0] for k, vv in res.records[-1].terms.items()},
-                    "initial_terms": {k: vv[0] for k, vv in res.records[0].terms.items()}})
-    return {"walk": walk, "metrics": metrics, "collision_frames": [int(i) for i in frame_subset(T, cfg.coll_frames)],
-            "records": [r.total[0] for r in res.records], "config": asdict(cfg), "w": float(w)}
+    out = []
+    for b, (_, goal) in enumerate(pairs):
+        walk = walks.select(b)
+        metrics = evaluate(walk, model.body.faces, scene, goal)
+        metrics.update({"iterations": res.iterations[b], "optim_s": wall / B, "ms_per_iter": summ["ms_per_iter"],
+                        "optim_peak_mem_mb": summ["peak_mem_mb"], "memory_kind": summ["memory_kind"], "batch": B,
+                        "final_terms": {k: vv[b] for k, vv in res.records[-1].terms.items()},
+                        "initial_terms": {k: vv[b] for k, vv in res.records[0].terms.items()}})
+        out.append({"walk": walk, "metrics": metrics, "collision_frames": [int(i) for i in frame_subset(T, cfg.coll_frames)],
+                    "records": [r.total[b] for r in res.records], "config": asdict(cfg), "w": float(w)})
+    return out
 
 
 @torch.no_grad()

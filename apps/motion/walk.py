@@ -65,7 +65,7 @@ here; this module holds the primitive layout and path controls, `Walk` and `Walk
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 import torch
@@ -141,6 +141,10 @@ class Walk:
     joints: torch.Tensor
     vertices: torch.Tensor
     stride: torch.Tensor   # (B,) metres per cycle of this body (two steps)
+
+    def select(self, b: int) -> "Walk":
+        """Sequence b as a Walk of one sequence (every field sliced on its first axis)."""
+        return Walk(**{f.name: getattr(self, f.name)[b:b + 1] for f in fields(self)})
 
     def params(self) -> dict:
         """Flat parameters for `body(**walk.params())`: betas (B*T, nb), global_orient (B*T, 3), body_pose (B*T, 69),
