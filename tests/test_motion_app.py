@@ -186,7 +186,8 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
              (["--scene", str(path), "--up", "z", "--units", "cm", "--start=-150,0", "--goal=900,0"], "off the floor"),
              (["--w", "mesh=x"], "weights must be numbers"),
              (["--published-cost"], "add coap to --model"),
-             (["--batch", "0"], "--batch must be >= 1")]
+             (["--batch", "0"], "--batch must be >= 1"),
+             (["--checkpoint-coap", "x"], "coap is not in --model")]
     for extra, msg in cases:
         assert main(["motion", "--model", "mesh", "--out", out] + extra) == 2
         err = capsys.readouterr().err.strip()

@@ -68,6 +68,8 @@ def add_parser(sub):
                         "no culling), on one frame (GBs of memory): summary row 'coap_published', cost only")
     p.add_argument("--render", type=int, default=1, help="frame strips of the first N sequences per scene (0: none)")
     p.add_argument("--out", default="out/motion", help="output folder")
+    p.add_argument("--checkpoint-volsmpl", default=None, help="trained VolumetricSMPL checkpoint (default: the shipped one)")
+    p.add_argument("--checkpoint-coap", default=None, help="trained COAP checkpoint (default: the shipped one)")
     p.add_argument("--batch", type=int, default=1,
                    help="optimise up to N start/goal pairs of a room together (one harness run; each walk its own "
                         "objective): fills a GPU; 1 (default) keeps the per-sequence time and memory columns")
@@ -169,6 +171,10 @@ def run(args) -> int:
     frames = check_frames(args.frames)
     if args.iters < 0:
         raise ValueError(f"--iters must be >= 0, got {args.iters}")
+    ckpts = {m: c for m, c in (("volsmpl", args.checkpoint_volsmpl), ("coap", args.checkpoint_coap)) if c}
+    for m in ckpts:
+        if m not in models:
+            raise ValueError(f"--checkpoint-{m} given but {m} is not in --model; add it or drop the checkpoint")
     if args.batch < 1:
         raise ValueError(f"--batch must be >= 1, got {args.batch}")
     if args.sequences < 1:
@@ -203,7 +209,7 @@ def run(args) -> int:
 
     body = volsmpl.create_body().to(args.device)
     model = W.WalkModel(body)
-    volumes = {m: volsmpl.attach_volume(body, model=m).to(args.device) for m in models}
+    volumes = {m: volsmpl.attach_volume(body, ckpts.get(m), model=m).to(args.device) for m in models}
     budget = args.mem_budget_gb * 2 ** 30
     sc0 = scenes[0]
     s0, g0 = sc0.pairs[0]
@@ -225,7 +231,7 @@ def run(args) -> int:
               f"{costs[m]['mem_per_frame_fwdbwd_mb']:.1f} MB fwd+bwd; {costs[m]['max_frames_in_budget']} frames fit "
               f"{args.mem_budget_gb:g} GB -> collision on {coll_frames[m]} frames")
     if args.published_cost:  # COAP's own code: every part at every point, the same values (cost only)
-        pub = volsmpl.attach_volume(body, model="coap", dense=True).to(args.device)
+        pub = volsmpl.attach_volume(body, ckpts.get("coap"), model="coap", dense=True).to(args.device)
         costs[PUBLISHED] = c = measure_cost(pub, probe, sc0.points, frames=1, repeats=args.cost_repeats,
                                             device=args.device, loss=published_penetration)
         fb = c["mem_per_frame_fwdbwd_mb"] * 2 ** 20
@@ -308,6 +314,7 @@ def run(args) -> int:
                    "scenes": [sc.name for sc in scenes], "sequences": args.sequences if args.scene is None else 1,
                    "coll_frames": coll_frames, "mem_budget_gb": args.mem_budget_gb, "residuals": args.residuals,
                    "floor_in_loss": args.floor_in_loss, "user_scene": args.scene, "device": args.device,
+                   "checkpoints": {m: ckpts.get(m, "shipped") for m in models if m != "mesh"}, "batch": args.batch,
                    "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
                                 "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"},
         "summary": summary, "cost": costs,
