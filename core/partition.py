@@ -49,15 +49,13 @@ def face_labels(faces: np.ndarray, vertex_labels: np.ndarray) -> np.ndarray:
     return np.where(all_differ, lab[:, 0], majority)
 
 
-def _pad_index_lists(lists, fill_first: bool) -> tuple[torch.Tensor, torch.Tensor]:
-    """Pad index arrays into (K, Lmax) plus a validity mask; pad with the first index or 0."""
+def _pad_index_lists(lists) -> tuple[torch.Tensor, torch.Tensor]:
+    """Pad index arrays into (K, Lmax) with 0 plus a validity mask."""
     L = max(1, max(len(x) for x in lists))
     out = np.zeros((len(lists), L), dtype=np.int64)
     mask = np.zeros((len(lists), L), dtype=bool)
     for k, x in enumerate(lists):
         out[k, : len(x)] = x
-        if fill_first and len(x):
-            out[k, len(x):] = x[0]
         mask[k, : len(x)] = True
     return torch.as_tensor(out), torch.as_tensor(mask)
 
@@ -83,8 +81,8 @@ class Partition(torch.nn.Module):
         n_samples: surface samples per part for the encoder (half tight, half extended faces, as COAP).
         box_padding: relative padding of part boxes (paper: 12.5%).
         seed: seed of the fixed surface sample set.
-    Buffers: vertex_labels (V,), face_labels (F,), faces (F,3), tight_vertices (K, Vmax) padded with
-    each part's first vertex, sample_faces (K, n) / sample_bary (K, n, 3) fixed surface samples.
+    Buffers: vertex_labels (V,) (part of each vertex; part k's vertices: vertex_labels == k), face_labels (F,),
+    faces (F,3), sample_faces (K, n) / sample_bary (K, n, 3) fixed surface samples.
     """
 
     def __init__(self, body, n_samples: int = 1000, box_padding: float = 0.125, seed: int = 0):
@@ -115,13 +113,11 @@ class Partition(torch.nn.Module):
         self.register_buffer("part_joints", torch.as_tensor(self.table.part_joints), persistent=False)
         self.register_buffer("parents", torch.as_tensor(arr["parents"]), persistent=False)
         self.register_buffer("collision_mask", torch.as_tensor(self.table.collision_mask.copy()), persistent=False)
-        tv, _ = _pad_index_lists([np.nonzero(vlab == k)[0] for k in range(K)], fill_first=True)
-        self.register_buffer("tight_vertices", tv, persistent=False)
         # every vertex in exactly one part: the vertices sorted by part, and each part's count (`boxes`)
         self.register_buffer("_by_part", torch.as_tensor(np.argsort(vlab, kind="stable")), persistent=False)
         self.part_vertex_counts = np.bincount(vlab, minlength=K).tolist()
-        pad_t, mask_t = _pad_index_lists(self.tight_face_ids, fill_first=False)
-        pad_e, mask_e = _pad_index_lists(self.extended_face_ids, fill_first=False)
+        pad_t, mask_t = _pad_index_lists(self.tight_face_ids)
+        pad_e, mask_e = _pad_index_lists(self.extended_face_ids)
         self.register_buffer("_tight_pad", pad_t, persistent=False)
         self.register_buffer("_tight_mask", mask_t, persistent=False)
         self.register_buffer("_ext_pad", pad_e, persistent=False)

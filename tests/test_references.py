@@ -49,7 +49,7 @@ def test_padded_boxes_are_the_tight_boxes_grown_about_their_centre(body):
     v = out.vertices.double()
     for b in range(2):
         for k in range(part.num_parts):
-            ids = torch.unique(part.tight_vertices[k])
+            ids = torch.nonzero(part.vertex_labels == k)[:, 0]
             R, t = G[b, k, :3, :3], G[b, k, :3, 3]
             local = (v[b, ids] - t) @ R  # R^T (v - t), row vectors
             tlo, thi = local.amin(0), local.amax(0)

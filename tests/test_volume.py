@@ -609,7 +609,7 @@ def test_queries_encode_only_parts_holding_points(model):
     enc = vol.net.encode
     vol.net.encode = lambda local, *a: encoded.append(local.shape[1]) or enc(local, *a)
     p = {k: v.to(torch.float64) for k, v in random_pose(1, seed=21).items()}
-    hand = vol.partition.tight_vertices[vol.partition.table.part_names.index("right_hand")]
+    hand = torch.nonzero(vol.partition.vertex_labels == vol.partition.table.part_names.index("right_hand"))[:, 0]
     g = torch.Generator().manual_seed(0)
 
     def run(points_of, full):

@@ -27,7 +27,7 @@ def main() -> None:
     for model in ("volsmpl", "coap"):
         body = volsmpl.create_body()
         vol = volsmpl.attach_volume(body, model=model).eval()
-        hand = vol.partition.tight_vertices[vol.partition.table.part_names.index("right_hand")]
+        hand = torch.nonzero(vol.partition.vertex_labels == vol.partition.table.part_names.index("right_hand"))[:, 0]
         g = torch.Generator().manual_seed(0)
         with torch.no_grad():
             v0 = body(**params).vertices
