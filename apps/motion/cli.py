@@ -124,18 +124,31 @@ def _mean(xs):
     return float(np.mean(xs)) if xs else None
 
 
-def summarize(records: list, cost: dict, total_mem_mb: float, max_frames: int, coll_frames) -> dict:
+def summarize(records: list, cost: dict, total_mem_mb: float, coll_frames) -> dict:
     keys = ("goal_dist_m", "collision_cm", "collision_obstacles_cm", "collision_frames_pct", "foot_skate_cm",
             "max_depth_cm", "jerk_max", "path_m", "optim_s", "ms_per_iter")
     s = {k: _mean([r["metrics"][k] for r in records]) for k in keys}
-    s.update({"mem_per_frame_mb": cost["mem_per_frame_fwd_mb"], "mem_per_frame_fwdbwd_mb": cost["mem_per_frame_fwdbwd_mb"],
-              "ms_per_frame_fwd": cost["ms_per_frame_fwd"], "ms_per_frame_fwdbwd": cost["ms_per_frame_fwdbwd"],
-              "total_mem_mb": total_mem_mb, "max_frames_in_budget": max_frames, "n_sequences": len(records),
-              "collision_frames_evaluated": coll_frames, "memory_kind": cost["memory_kind"]})
-    # Table 5's columns in the paper's units
-    s.update({"frame_mem_gb": s["mem_per_frame_mb"] / 1024, "frame_ms": s["ms_per_frame_fwd"],
-              "total_mem_gb": total_mem_mb / 1024})
+    s.update(cost_columns(cost))
+    s.update({"total_mem_mb": total_mem_mb, "n_sequences": len(records),
+              "collision_frames_evaluated": coll_frames, "total_mem_gb": total_mem_mb / 1024})
     return s
+
+
+def cost_columns(cost: dict) -> dict:
+    """The summary's per-frame cost columns of a `measure_cost` result (Table 5's in the paper's units too)."""
+    return {"mem_per_frame_mb": cost["mem_per_frame_fwd_mb"], "mem_per_frame_fwdbwd_mb": cost["mem_per_frame_fwdbwd_mb"],
+            "ms_per_frame_fwd": cost["ms_per_frame_fwd"], "ms_per_frame_fwdbwd": cost["ms_per_frame_fwdbwd"],
+            "max_frames_in_budget": cost.get("max_frames_in_budget"), "memory_kind": cost["memory_kind"],
+            "frame_mem_gb": cost["mem_per_frame_fwd_mb"] / 1024, "frame_ms": cost["ms_per_frame_fwd"]}
+
+
+def fit_budget(cost: dict, budget_bytes: float) -> str:
+    """Record in `cost` the frames whose forward + backward fit the memory budget; the cost's one-line summary."""
+    fb = cost["mem_per_frame_fwdbwd_mb"] * 2 ** 20
+    cost["max_frames_in_budget"] = int(budget_bytes // fb) if fb > 0 else None
+    return (f"collision term per frame: {cost['ms_per_frame_fwd']:.1f} ms fwd, {cost['ms_per_frame_fwdbwd']:.1f} ms "
+            f"fwd+bwd, {cost['mem_per_frame_fwd_mb']:.1f} MB fwd, {cost['mem_per_frame_fwdbwd_mb']:.1f} MB fwd+bwd; "
+            f"{cost['max_frames_in_budget']} frames fit {budget_bytes / 2 ** 30:g} GB")
 
 
 def format_table(summary: dict) -> str:
@@ -222,24 +235,15 @@ def run(args) -> int:
     for m in models:   # the per-frame cost on the full cloud, on the straight walk of the first pair
         costs[m] = measure_cost(volumes[m], probe, sc0.points, frames=args.cost_frames, repeats=args.cost_repeats,
                                 device=args.device)
-        fb = costs[m]["mem_per_frame_fwdbwd_mb"] * 2 ** 20
-        costs[m]["max_frames_in_budget"] = int(budget // fb) if fb > 0 else None
+        line = fit_budget(costs[m], budget)
         fits = costs[m]["max_frames_in_budget"] is None or costs[m]["max_frames_in_budget"] >= frames
         coll_frames[m] = ("all" if fits else 16) if cf == "auto" else ("all" if cf == "all" else int(cf))
-        print(f"{m:8s} collision term per frame: {costs[m]['ms_per_frame_fwd']:.1f} ms fwd, "
-              f"{costs[m]['ms_per_frame_fwdbwd']:.1f} ms fwd+bwd, {costs[m]['mem_per_frame_fwd_mb']:.1f} MB fwd, "
-              f"{costs[m]['mem_per_frame_fwdbwd_mb']:.1f} MB fwd+bwd; {costs[m]['max_frames_in_budget']} frames fit "
-              f"{args.mem_budget_gb:g} GB -> collision on {coll_frames[m]} frames")
+        print(f"{m:8s} {line} -> collision on {coll_frames[m]} frames")
     if args.published_cost:  # COAP's own code: every part at every point, the same values (cost only)
         pub = volsmpl.attach_volume(body, ckpts.get("coap"), model="coap", dense=True).to(args.device)
-        costs[PUBLISHED] = c = measure_cost(pub, probe, sc0.points, frames=1, repeats=args.cost_repeats,
-                                            device=args.device, loss=published_penetration)
-        fb = c["mem_per_frame_fwdbwd_mb"] * 2 ** 20
-        c["max_frames_in_budget"] = int(budget // fb) if fb > 0 else None
-        print(f"{'coap as published':8s} collision term per frame: {c['ms_per_frame_fwd']:.1f} ms fwd, "
-              f"{c['ms_per_frame_fwdbwd']:.1f} ms fwd+bwd, {c['mem_per_frame_fwd_mb']:.1f} MB fwd, "
-              f"{c['mem_per_frame_fwdbwd_mb']:.1f} MB fwd+bwd; {c['max_frames_in_budget']} frames fit "
-              f"{args.mem_budget_gb:g} GB")
+        costs[PUBLISHED] = measure_cost(pub, probe, sc0.points, frames=1, repeats=args.cost_repeats,
+                                        device=args.device, loss=published_penetration)
+        print(f"coap as published {fit_budget(costs[PUBLISHED], budget)}")
         del pub
 
     records = {(m, w): [] for m in models for w in weights[m]}
@@ -289,7 +293,7 @@ def run(args) -> int:
     summary = {}
     for (m, w), recs in records.items():
         total = max(r["metrics"]["optim_peak_mem_mb"] for r in recs)
-        s = summarize(recs, costs[m], total, costs[m]["max_frames_in_budget"], coll_frames[m])
+        s = summarize(recs, costs[m], total, coll_frames[m])
         s["w"] = w
         if len(weights[m]) == 1 or (m == "coap" and w == TABLE5_COAP_W):
             summary[m] = s
@@ -298,13 +302,7 @@ def run(args) -> int:
     if "coap" not in summary and "coap" in models:   # a sweep without 0.1: Table 5's row is its first weight
         summary["coap"] = dict(summary[_wkey("coap", weights["coap"][0])])
     if PUBLISHED in costs:   # cost columns only: its optimisation would be the 'coap' rows' (same values)
-        c = costs[PUBLISHED]
-        summary[PUBLISHED] = {"mem_per_frame_mb": c["mem_per_frame_fwd_mb"],
-                              "mem_per_frame_fwdbwd_mb": c["mem_per_frame_fwdbwd_mb"],
-                              "ms_per_frame_fwd": c["ms_per_frame_fwd"], "ms_per_frame_fwdbwd": c["ms_per_frame_fwdbwd"],
-                              "max_frames_in_budget": c["max_frames_in_budget"], "memory_kind": c["memory_kind"],
-                              "frame_mem_gb": c["mem_per_frame_fwd_mb"] / 1024, "frame_ms": c["ms_per_frame_fwd"],
-                              "n_sequences": 0}
+        summary[PUBLISHED] = dict(cost_columns(costs[PUBLISHED]), n_sequences=0)
     print()
     print(format_table(summary))
     print("per-frame cost: the collision term on the full cloud (" + ", ".join(sorted({c["memory_kind"] for c in costs.values()}))
