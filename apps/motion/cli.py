@@ -119,6 +119,12 @@ def _wkey(model: str, w: float) -> str:
     return f"{model}_w{s if '.' in s else s + '.0'}"
 
 
+def _print_case(scene: str, k: int, label: str, met: dict, reused: bool = False) -> None:
+    print(f"{scene:8s} seq {k} {label:12s} goal {met['goal_dist_m']:.3f} m  collision {met['collision_cm']:.3f} cm "
+          f"({met['collision_frames_pct']:.0f}% frames)  skate {met['foot_skate_cm']:.3f} cm  {met['optim_s']:.0f} s"
+          + ("  (reused)" if reused else ""), flush=True)
+
+
 def _mean(xs):
     xs = [x for x in xs if x is not None and np.isfinite(x)]
     return float(np.mean(xs)) if xs else None
@@ -268,7 +274,8 @@ def run(args) -> int:
                     rec = store.get(names[k], keys[k])
                     if rec is not None:
                         recs[k] = rec
-                reused = set(recs)
+                for k in sorted(recs):
+                    _print_case(sc.name, k, label, recs[k]["metrics"], reused=True)
                 todo = [k for k in range(len(sc.pairs)) if k not in recs]
                 for i in range(0, len(todo), args.batch):   # the pairs not stored yet, up to --batch at a time
                     ks = todo[i:i + args.batch]
@@ -280,14 +287,11 @@ def run(args) -> int:
                         if k < args.render:
                             W.render_strip(r["walk"], body.faces, out / f"strip_{names[k]}.png", every=10)
                         store.put(names[k], keys[k], recs[k])
+                        _print_case(sc.name, k, label, recs[k]["metrics"])
                 for k in range(len(sc.pairs)):
-                    rec, met = recs[k], recs[k]["metrics"]
-                    paths.setdefault(label, []).append(np.asarray(met["pelvis_xz"]))
-                    records[(m, w)].append(rec)
-                    cases.append(rec)
-                    print(f"{sc.name:8s} seq {k} {label:12s} goal {met['goal_dist_m']:.3f} m  collision "
-                          f"{met['collision_cm']:.3f} cm ({met['collision_frames_pct']:.0f}% frames)  skate "
-                          f"{met['foot_skate_cm']:.3f} cm  {met['optim_s']:.0f} s" + ("  (reused)" if k in reused else ""))
+                    paths.setdefault(label, []).append(np.asarray(recs[k]["metrics"]["pelvis_xz"]))
+                    records[(m, w)].append(recs[k])
+                    cases.append(recs[k])
         topdown(sc, paths, sc.pairs, path=out / f"topdown_{sc.name}.png")
 
     summary = {}
