@@ -132,7 +132,7 @@ def test_penetration_zero_apart_positive_inside_with_outward_gradient(body, pose
     outside = _thigh_points(body, posed, -0.03)
     mask = torch.ones(outside.shape[:2], dtype=torch.bool)
     assert mask.shape[1] == 50
-    assert float(penetration(query, outside, mask)) == 0.0
+    assert float(penetration(query, outside, mask).detach()) == 0.0
     inside = _thigh_points(body, posed, 0.015)
     t = torch.zeros(1, 3, requires_grad=True)
     pen = penetration(query, inside + t[:, None], mask)
@@ -142,7 +142,7 @@ def test_penetration_zero_apart_positive_inside_with_outward_gradient(body, pose
     centre = inside[0].mean(dim=0)
     outward = torch.nn.functional.normalize(inside[0] - centre, dim=-1).mean(dim=0)
     step = -g[0] / g[0].norm() * 0.01
-    assert float(penetration(query, inside + step, mask)) < float(pen)
+    assert float(penetration(query, inside + step, mask).detach()) < float(pen.detach())
     assert g[0].norm() > 0 and torch.isfinite(outward).all()
 
 
