@@ -2,6 +2,7 @@
 
 - `MissingDependency`: an ImportError whose message says what needed the package and how to install it; the CLI
   reports it as a user error (one line, exit 2), not as an internal error.
+- `open3d_or_none()`: the open3d module, or None where it does not import (callers with a torch path instead).
 - `open3d(purpose)`: the open3d module (BVH distances, ray casts, point-cloud sampling). Its wheel links the system
   library libusb-1.0, which slim images lack: the message then names `apt-get install libusb-1.0-0`.
 
@@ -11,11 +12,20 @@ Example:
 """
 from __future__ import annotations
 
-__all__ = ["MissingDependency", "open3d"]
+__all__ = ["MissingDependency", "open3d", "open3d_or_none"]
 
 
 class MissingDependency(ImportError):
     """A package a feature needs does not import; the message names the feature and the fix."""
+
+
+def open3d_or_none():
+    """The open3d module, or None where importing it fails."""
+    try:
+        import open3d as o3d
+    except ImportError:
+        return None
+    return o3d
 
 
 def open3d(purpose: str):

@@ -397,11 +397,8 @@ def batch_mesh_sdf(vertices, faces, points, sign: str = "raycast", nsamples: int
 
 # ---------------------------------------------------------------------------------------------- backends
 def _open3d_imports() -> bool:
-    try:
-        _open3d()
-    except ImportError:
-        return False
-    return True
+    from .deps import open3d_or_none
+    return open3d_or_none() is not None
 
 
 def resolve_gt_backend(backend: str, device) -> str:

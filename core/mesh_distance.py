@@ -16,25 +16,18 @@ from __future__ import annotations
 
 import torch
 
+from .deps import open3d_or_none
 from .groundtruth import closed_mesh_problems, ray_winding_number, winding_number_reference
 from .mesh_query import DEFAULT_CHUNK, MeshQuery, closest_points_on_triangles
 
 __all__ = ["closest_points_on_triangles", "nearest_faces", "winding_numbers", "mesh_signed_distance"]
 
 
-def _open3d_or_none():
-    try:
-        import open3d as o3d
-    except ImportError:
-        return None
-    return o3d
-
-
 def _backend(backend: str):
     """open3d module for backend 'open3d' (or 'auto' when it imports), None for torch."""
     if backend not in ("auto", "open3d", "torch"):
         raise ValueError(f"backend must be 'auto', 'open3d' or 'torch', got {backend!r}")
-    o3d = _open3d_or_none() if backend != "torch" else None
+    o3d = open3d_or_none() if backend != "torch" else None
     if backend == "open3d" and o3d is None:
         raise ValueError("backend='open3d' but open3d does not import; install it (pip install open3d) or use backend='torch'")
     return o3d

@@ -22,6 +22,8 @@ import numpy as np
 import torch
 import trimesh
 
+from ..deps import open3d_or_none
+
 
 def _as_points(points, name: str = "points") -> np.ndarray:
     if torch.is_tensor(points):
@@ -97,9 +99,8 @@ def farthest_point_sample(points, n: int, seed: int | None = None) -> np.ndarray
     if n > len(p):
         raise ValueError(f"cannot pick n = {n} points from {len(p)}; use subsample(..., method='random') to pad.")
     start = 0 if seed is None else int(np.random.default_rng(seed).integers(len(p)))
-    try:
-        import open3d as o3d
-    except ImportError:
+    o3d = open3d_or_none()
+    if o3d is None:
         return farthest_point_loop(p, n, start)
     pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p))
     tag = np.zeros_like(p)
