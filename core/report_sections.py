@@ -253,7 +253,19 @@ def summary_section(ctx) -> list[str]:
     for tid in tids:
         key_map = paper_tables.TABLES[tid].get("our_keys")
         out += ([""] if out else []) + summary_table(tid, assign[tid], key_map) + paper_mismatch(d, tid)
+    out += tuning_note(d.get("tuning"))
     n = n_cases(d)
     if n is not None:
         out += ["", f"{n} per-case records in the result (`cases`)."]
     return out
+
+
+def tuning_note(t) -> list[str]:
+    """The lines saying which rows a result tuned on which cases (`tuning`: tune_scenes, test_scenes, choice
+    {back-end: weight}, criterion); none without it."""
+    if not isinstance(t, dict) or not t.get("test_scenes"):
+        return []
+    choice = ", ".join(f"{m} w = {w:g}" for m, w in (t.get("choice") or {}).items())
+    return ["", f"Rows `*_test`: the test cases only ({', '.join(t['test_scenes'])}), each back-end at the weight "
+                f"that scored best on the tuning cases ({', '.join(t.get('tune_scenes') or [])}): {choice}; "
+                f"criterion: {t.get('criterion', 'not recorded')}."]

@@ -11,7 +11,10 @@ and forward + backward); the longest sequence whose forward + backward fits --me
 per-frame memory, and a model for which --frames do not fit is evaluated on 16 evenly spaced frames (the authors'
 COAP setting; --coll-frames forces 'all' or a number).
 
-Writes OUT/results.json (summary.<model> and summary.<model>_w<w>, the paper's rows, per-sequence records, meta),
+With two rooms or more, every third room tunes the weights and the others test (tuning.py): summary.<model>_test
+is each model over the test rooms at the weight that scored best on the tuning rooms (results.json's `tuning`).
+
+Writes OUT/results.json (summary.<model>, <model>_w<w> and <model>_test, the paper's rows, per-sequence records, meta),
 OUT/topdown_<scene>.png and OUT/strip_<scene>_<k>_<model>.png for the first --render sequences.
 """
 from __future__ import annotations
@@ -24,6 +27,8 @@ from pathlib import Path
 
 import numpy as np
 import torch
+
+from .tuning import CRITERION, choose_weights, split_scenes
 
 PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
 TABLE5_COAP_W = 0.1     # Table 5's COAP row is D.1's w = 0.1 row
@@ -171,6 +176,22 @@ def format_table(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def tuned_rows(summary: dict, records: dict, names: list[str], costs: dict, coll_frames: dict) -> dict | None:
+    """Add to `summary` the rows '<model>_test' (the test rooms only, at the weight chosen on the tuning rooms:
+    tuning.py) and return the tuning record for results.json; None (no rows) with fewer than two rooms."""
+    if len(names) < 2:
+        return None
+    tune, test = split_scenes(names)
+    choice = choose_weights(records, tune)
+    for m, c in choice.items():
+        recs = [r for r in records[(m, c["w"])] if r["scene"] in set(test)]
+        s = summarize(recs, costs[m], max(r["metrics"]["optim_peak_mem_mb"] for r in recs), coll_frames[m])
+        summary[f"{m}_test"] = dict(s, w=c["w"], split="test")
+    return {"criterion": CRITERION, "tune_scenes": tune, "test_scenes": test,
+            "choice": {m: c["w"] for m, c in choice.items()},
+            "scores": {m: {f"{w:g}": sc for w, sc in c["scores"].items()} for m, c in choice.items()}}
+
+
 def run(args) -> int:
     import volsmpl
     from volsmpl import paper
@@ -307,8 +328,13 @@ def run(args) -> int:
         summary["coap"] = dict(summary[_wkey("coap", weights["coap"][0])])
     if PUBLISHED in costs:   # cost columns only: its optimisation would be the 'coap' rows' (same values)
         summary[PUBLISHED] = dict(cost_columns(costs[PUBLISHED]), n_sequences=0)
+    tuning = tuned_rows(summary, records, [sc.name for sc in scenes], costs, coll_frames)
     print()
     print(format_table(summary))
+    if tuning:
+        print(f"rows *_test: rooms {', '.join(tuning['test_scenes'])} only, each model at the weight best on rooms "
+              f"{', '.join(tuning['tune_scenes'])} ({', '.join(f'{m} w={w:g}' for m, w in tuning['choice'].items())}); "
+              f"criterion: {tuning['criterion']}")
     print("per-frame cost: the collision term on the full cloud (" + ", ".join(sorted({c["memory_kind"] for c in costs.values()}))
           + "); total: peak of one whole-sequence optimisation; collision: exact mesh test, every scene point")
     result = {
@@ -319,7 +345,7 @@ def run(args) -> int:
                    "checkpoints": {m: ckpts.get(m, "shipped") for m in models if m != "mesh"}, "batch": args.batch,
                    "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
                                 "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"},
-        "summary": summary, "cost": costs,
+        "summary": summary, "tuning": tuning, "cost": costs,
         "paper": {**paper.rows("motion"), **paper.rows("coll_weights")},
         "cases": cases, "meta": machine_info(args.device),
     }
