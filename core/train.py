@@ -1,9 +1,10 @@
 """Training of the volumetric body model (paper Sec. 3.4): `volsmpl train`.
 
 Every step draws B bodies (random poses within joint limits: `pose_mode` 'realistic' by default, 'mixed'
-makes a share `extreme_fraction` of them extreme; shapes from Anny's calibrated population), per part 256
-points uniform in its padded box and 256 near the surface (optionally `n_body_surface` more per body near the
-whole surface, area-weighted like the evaluation's near-surface set), exact signed distances to the posed mesh
+makes a share `extreme_fraction` of them extreme, `contact_fraction` a share in self-contact poses; shapes from
+Anny's calibrated population), per part 256 points uniform in its padded box and 256 near the surface
+(optionally `n_body_surface` more per body near the whole surface, area-weighted like the evaluation's
+near-surface set, and `n_contact_surface` around the vertices where the body touches itself), exact signed distances to the posed mesh
 (open3d BVH distance; sign from the winding number, which calls self-overlapping parts inside, their union, like
 the min over parts), and minimises eq. 3:
 

@@ -20,6 +20,7 @@ import torch
 
 from .body.poses import sample_poses
 from .body.shapes import sample_betas
+from .contact_regions import contact_vertices, sample_contact_points
 from .groundtruth import batch_sdf
 from .train_config import TrainConfig
 from .training_queries import sample_training_queries
@@ -45,7 +46,8 @@ def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> d
     B = cfg.batch_size
     params = {
         "betas": sample_betas(B, num_betas=body.num_betas, seed=seed).to(dev),
-        "body_pose": sample_poses(B, seed=seed, mode=cfg.pose_mode, extreme_fraction=cfg.extreme_fraction).to(dev),
+        "body_pose": sample_poses(B, seed=seed, mode=cfg.pose_mode, extreme_fraction=cfg.extreme_fraction,
+                                  contact_fraction=cfg.contact_fraction).to(dev),
         "global_orient": torch.randn(B, 3, generator=g, device=dev) * cfg.global_orient_scale,
         "transl": torch.zeros(B, 3, device=dev),
     }
@@ -56,6 +58,10 @@ def make_batch(cfg: TrainConfig, body, partition, step: int, rank: int = 0) -> d
         pts = sample_training_queries(out.vertices, body.faces_tensor, G, bmin, bmax, cfg.n_uniform, cfg.n_surface,
                                       sigma=cfg.surface_sigma, face_ids_per_part=partition.tight_face_ids, generator=g,
                                       n_body=cfg.n_body_surface, body_sigma=cfg.body_surface_sigma)
+        if cfg.n_contact_surface:   # after every other block, so that 0 leaves those unchanged
+            touching = contact_vertices(out.vertices, body.v_template)
+            near = sample_contact_points(out.vertices, touching, cfg.n_contact_surface, cfg.contact_sigma, generator=g)
+            pts = torch.cat([pts, near.to(pts.dtype)], dim=1)
         _sync(dev)
         t1 = time.perf_counter()
         gt = batch_sdf(out.vertices, body.faces_tensor, pts, sign=cfg.gt_sign, nsamples=cfg.gt_rays,

@@ -38,6 +38,9 @@ class TrainConfig:
     residual: str = "signed"        # distance term: 'signed' (d~ - d)^2 or 'abs' (|d~| - |d|)^2 (eq. 3 literally)
     pose_mode: str = "realistic"    # training poses: 'realistic', 'extreme' or 'mixed' (volsmpl.body.poses.sample_euler)
     extreme_fraction: float = 0.5   # pose_mode 'mixed': share of bodies with extreme poses
+    contact_fraction: float = 0.0   # share of bodies in self-contact poses instead (volsmpl.body.contact_poses)
+    n_contact_surface: int = 0      # per body, near its self-contact vertices (volsmpl.contact_regions)
+    contact_sigma: tuple = (0.005, 0.01)  # metres, offsets of those
     global_orient_scale: float = 0.0  # rad sd of random global orientation (parts are in local frames anyway)
     gt_sign: str = "ray_winding"    # ground-truth sign: winding number (self-overlaps inside) counted along rays
                                     # ('ray_winding', exact, fastest), or libigl's 'fast_winding' / 'winding'; or 'raycast' parity
@@ -71,7 +74,7 @@ class TrainConfig:
             raise ValueError(f"sign_loss must be 'ste' or 'logistic', got {self.sign_loss!r}")
         if not (self.sign_tau > 0 and self.sign_weight >= 0):
             raise ValueError(f"sign_tau={self.sign_tau} must be > 0 (metres) and sign_weight={self.sign_weight} >= 0.")
-        check_pose_mode(self.pose_mode, self.extreme_fraction)
+        check_pose_mode(self.pose_mode, self.extreme_fraction, self.contact_fraction)
         if self.residual not in ("signed", "abs"):
             raise ValueError(f"residual must be 'signed' or 'abs', got {self.residual!r}")
         if self.model_kind not in learned_models():
@@ -86,6 +89,7 @@ class TrainConfig:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
         d["surface_sigma"] = list(self.surface_sigma)
         d["body_surface_sigma"] = list(self.body_surface_sigma)
+        d["contact_sigma"] = list(self.contact_sigma)
         d["model"] = self.model.to_dict()
         return d
 
@@ -101,7 +105,7 @@ class TrainConfig:
             raise ValueError(f"model_kind must be one of {', '.join(learned_models())} (a network), got {kind!r}")
         if kind != "volsmpl" or "model" in d:
             d["model"] = model_kind(kind).config_from_dict(d.get("model", {}))
-        for key in ("surface_sigma", "body_surface_sigma"):
+        for key in ("surface_sigma", "body_surface_sigma", "contact_sigma"):
             if key in d:
                 d[key] = tuple(d[key])
         return cls(**d)
@@ -109,11 +113,13 @@ class TrainConfig:
 
 #: integer fields and their smallest value
 _INTS = {"steps": 1, "batch_size": 1, "micro_batch": 1, "n_uniform": 0, "n_surface": 0, "n_body_surface": 0,
+         "n_contact_surface": 0,
          "gt_rays": 1, "seed": 0, "ckpt_every": 1, "log_every": 1, "keep_ckpts": 1, "num_threads": 0,
          "num_workers": 0, "anneal_start": 0}
 #: real fields: (smallest value, whether it must be above it rather than at least it)
 _REALS = {"lr": (0.0, True), "lr_final": (0.0, True), "sign_tau": (0.0, True), "sign_weight": (0.0, False),
           "abs_weight": (0.0, False), "global_orient_scale": (0.0, False), "extreme_fraction": (0.0, False),
+          "contact_fraction": (0.0, False),
           "ema_decay": (0.0, False)}
 
 
@@ -131,11 +137,12 @@ def check_numbers(cfg: "TrainConfig") -> None:
             raise TypeError(f"training config: {name} must be a number, got {type(v).__name__} {v!r}.")
         if not math.isfinite(v) or v < least or (strict and v == least):
             raise ValueError(f"training config: {name}={v} must be a finite number {'>' if strict else '>='} {least}.")
-    if cfg.n_uniform + cfg.n_surface + cfg.n_body_surface == 0:
-        raise ValueError("training config: n_uniform, n_surface and n_body_surface are all 0: no query points to train on.")
+    if cfg.n_uniform + cfg.n_surface + cfg.n_body_surface + cfg.n_contact_surface == 0:
+        raise ValueError("training config: n_uniform, n_surface, n_body_surface and n_contact_surface are all 0: "
+                         "no query points to train on.")
     if cfg.gt_rays % 2 == 0:
         raise ValueError(f"training config: gt_rays={cfg.gt_rays} must be odd (a majority vote of rays).")
-    for name in ("surface_sigma", "body_surface_sigma"):  # the standard deviations of a mixture (training_queries)
+    for name in ("surface_sigma", "body_surface_sigma", "contact_sigma"):  # the standard deviations of a mixture (training_queries)
         v = getattr(cfg, name)
         if not (isinstance(v, (tuple, list)) and len(v) > 0 and all(
                 isinstance(x, numbers.Real) and not isinstance(x, bool) and math.isfinite(x) and x >= 0 for x in v)):

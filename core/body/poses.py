@@ -79,16 +79,18 @@ def body_pose_to_euler(body_pose: torch.Tensor) -> np.ndarray:
 POSE_MODES = ("realistic", "extreme", "mixed")
 
 
-def check_pose_mode(mode: str, extreme_fraction: float) -> None:
-    """Raise ValueError unless `mode` is one of POSE_MODES and `extreme_fraction` lies in [0, 1]."""
+def check_pose_mode(mode: str, extreme_fraction: float, contact_fraction: float = 0.0) -> None:
+    """Raise ValueError unless `mode` is one of POSE_MODES and both fractions lie in [0, 1]."""
     if mode not in POSE_MODES:
         raise ValueError(f"pose_mode must be one of {POSE_MODES}, got {mode!r}")
     if not 0.0 <= extreme_fraction <= 1.0:
         raise ValueError(f"extreme_fraction must lie in [0, 1], got {extreme_fraction}")
+    if not 0.0 <= contact_fraction <= 1.0:
+        raise ValueError(f"contact_fraction must lie in [0, 1], got {contact_fraction}")
 
 
 def sample_euler(n: int, seed: int | None = None, mode: str = "realistic",
-                 extreme_fraction: float = 0.5) -> np.ndarray:
+                 extreme_fraction: float = 0.5, contact_fraction: float = 0.0) -> np.ndarray:
     """Random joint angles within JOINT_LIMITS, (n, 23, 3).
 
     mode 'realistic': per angle, with prob. 0.6 a normal around the neutral angle (0 clipped into the
@@ -96,8 +98,24 @@ def sample_euler(n: int, seed: int | None = None, mode: str = "realistic",
     mode 'extreme': uniform over the full range of every angle (validation of hard poses).
     mode 'mixed': per body, with prob. `extreme_fraction` an extreme pose, else a realistic one (the
     realistic bodies are those mode 'realistic' draws from the same seed).
+    contact_fraction > 0: afterwards, per body with that probability, a self-contact pose
+    (`volsmpl.body.contact_poses`) replaces the mode's draw; from a stream of its own, so that 0 leaves every
+    draw above as it was.
     """
-    check_pose_mode(mode, extreme_fraction)
+    check_pose_mode(mode, extreme_fraction, contact_fraction)
+    out = _sample_mode(n, seed, mode, extreme_fraction)
+    if contact_fraction > 0:
+        from .contact_poses import sample_contact_euler
+
+        ss = np.random.SeedSequence([seed, 0xC0DE]) if seed is not None else np.random.SeedSequence()
+        pick = np.random.default_rng(ss).random(n) < contact_fraction
+        if pick.any():
+            contact = sample_contact_euler(n, seed=int(ss.generate_state(1)[0]))
+            out = np.where(pick[:, None, None], contact, out)
+    return out
+
+
+def _sample_mode(n: int, seed, mode: str, extreme_fraction: float) -> np.ndarray:
     rng = np.random.default_rng(seed)
     lo, hi = _LIMITS[..., 0], _LIMITS[..., 1]
     uni = rng.uniform(lo, hi, size=(n, *lo.shape))
@@ -115,9 +133,9 @@ def sample_euler(n: int, seed: int | None = None, mode: str = "realistic",
 
 
 def sample_poses(n: int, seed: int | None = None, mode: str = "realistic",
-                 extreme_fraction: float = 0.5) -> torch.Tensor:
+                 extreme_fraction: float = 0.5, contact_fraction: float = 0.0) -> torch.Tensor:
     """(n, 69) random SMPL body poses within per-joint anatomical limits (see sample_euler)."""
-    return euler_to_body_pose(sample_euler(n, seed, mode, extreme_fraction))
+    return euler_to_body_pose(sample_euler(n, seed, mode, extreme_fraction, contact_fraction))
 
 
 def within_limits(body_pose: torch.Tensor, tol: float = 1e-6) -> torch.Tensor:
