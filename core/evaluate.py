@@ -76,6 +76,8 @@ class EvalConfig:
             timed runs (median reported) and untimed warm-up runs; timing_threads: torch CPU threads of the
             timing subprocess (None: this process's torch.get_num_threads()). On a shared machine use 1:
             with other processes busy, OpenMP threads waiting for each other can slow a CPU query 100x.
+        precision: the volume's decoder arithmetic during the evaluation ('full', 'bf16', 'tf32';
+            `Volume.set_precision`), for the accuracy cost of a reduced-precision mode.
     """
 
     n_bodies: int = 64
@@ -94,6 +96,7 @@ class EvalConfig:
     timing_repeats: int = 10
     timing_warmup: int = 3
     timing_threads: Optional[int] = None
+    precision: str = "full"
 
     def __post_init__(self):
         for name in ("n_bodies", "n_points", "batch_size", "timing_repeats"):
@@ -207,11 +210,18 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
     which needs `resource_spec` (how the subprocess rebuilds the volume: see measure_resources)."""
     cfg = dataclasses.replace(config or EvalConfig(), **overrides)
     volume = volume.to(torch.device(cfg.device))
-    if volume.is_sdf:
-        res = evaluate(lambda out, pts: volume.query(out, pts), bodies=bodies, body=body, config=cfg, name=name)
-    else:  # occupancy (COAP): level - occupancy is negative inside, so the IoU columns are exact
-        res = evaluate(lambda out, pts: volume.level - volume.query(out, pts), bodies=bodies, body=body, config=cfg,
-                       name=name)
+    before = volume.precision
+    if cfg.precision != before:
+        volume.set_precision(cfg.precision)   # ValueError for a volume without that mode
+    try:
+        if volume.is_sdf:
+            res = evaluate(lambda out, pts: volume.query(out, pts), bodies=bodies, body=body, config=cfg, name=name)
+        else:  # occupancy (COAP): level - occupancy is negative inside, so the IoU columns are exact
+            res = evaluate(lambda out, pts: volume.level - volume.query(out, pts), bodies=bodies, body=body,
+                           config=cfg, name=name)
+    finally:
+        if cfg.precision != before:
+            volume.set_precision(before)
         for k in [k for k in res.metrics if k.startswith("mse")]:  # not distances: no SDF error to report
             res.metrics[k] = None
             res.per_body[k] = [None] * len(res.per_body[k])
@@ -282,7 +292,8 @@ def measure_resources(spec: dict, config: Optional[EvalConfig] = None, **overrid
         inputs = os.path.join(tmp, "inputs.pt")
         torch.save({"bodies": bodies, "points": points}, inputs)
         job = {"spec": spec, "inputs": inputs, "device": cfg.device, "repeats": cfg.timing_repeats,
-               "warmup": cfg.timing_warmup, "threads": cfg.timing_threads or torch.get_num_threads()}
+               "warmup": cfg.timing_warmup, "threads": cfg.timing_threads or torch.get_num_threads(),
+               "precision": cfg.precision}
         return run_isolated("volsmpl.evaluate:resource_job", job, timeout_s=1800)
 
 
@@ -305,6 +316,8 @@ def resource_job(job: dict) -> dict:
     else:
         vol = attach_volume(body, checkpoint=spec.get("checkpoint"), model=spec.get("model", "volsmpl"))
     body, vol = body.to(device), vol.to(device)
+    if job.get("precision", "full") != "full":
+        vol.set_precision(job["precision"])
     data = torch.load(job["inputs"])
     with torch.no_grad():
         out = body(**{k: v.to(device) for k, v in data["bodies"].items()})
@@ -389,6 +402,9 @@ def add_parser(sub):
                         "(calls self-overlaps outside); cached")
     p.add_argument("--cache-dir", default=None, help=f"ground-truth cache (default {default_cache_dir()})")
     p.add_argument("--no-cache", action="store_true", help="recompute the ground truth, do not write the cache")
+    p.add_argument("--precision", default="full", choices=["full", "bf16", "tf32"],
+                   help="decoder arithmetic: full (default), bf16 (bfloat16 layers) or tf32 (CUDA tensor cores); "
+                        "reduced precision trades accuracy for speed on GPUs")
     p.add_argument("--out", default=None, help="write the results as JSON here")
     p.add_argument("--split", default="all", choices=["standard", "self_contact", "all"],
                    help="validation split: the standard set, the self-contact poses (volsmpl.contact_split: min(n-bodies, "
@@ -409,7 +425,8 @@ def run(args) -> int:
         torch.set_num_threads(args.threads)
     cfg = EvalConfig(n_bodies=args.n_bodies, n_points=args.points, seed=args.seed, batch_size=args.batch_size,
                      device=args.device, timing=args.timing, timing_repeats=args.repeats, cache_dir=args.cache_dir,
-                     use_cache=not args.no_cache, timing_threads=args.threads, gt_sign=args.gt_sign)
+                     use_cache=not args.no_cache, timing_threads=args.threads, gt_sign=args.gt_sign,
+                     precision=args.precision)
     init = {"config": {}, "init_seed": 0} if args.random_init else None
     if args.split == "self_contact":
         from .contact_split import evaluate_self_contact

@@ -18,6 +18,8 @@ min over parts; points in no box get the analytic box SDF (paper eq. 4).
 """
 from __future__ import annotations
 
+import contextlib
+
 import torch
 from torch.profiler import record_function
 
@@ -34,6 +36,25 @@ from .volume_api import BodyVolume, check_output
 
 #: profiler scope of the decoder evaluations of a query (volsmpl bench times the decoder alone by it)
 DECODER_SCOPE = "volsmpl::decoder"
+
+
+@contextlib.contextmanager
+def tf32_matmuls():
+    """float32 CUDA matmuls on TF32 tensor cores inside the block; the previous setting is restored after it."""
+    m = torch.backends.cuda.matmul
+    new_api = hasattr(m, "fp32_precision")
+    before = m.fp32_precision if new_api else m.allow_tf32
+    try:
+        if new_api:
+            m.fp32_precision = "tf32"
+        else:
+            m.allow_tf32 = True
+        yield
+    finally:
+        if new_api:
+            m.fp32_precision = before
+        else:
+            m.allow_tf32 = before
 
 
 def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -63,14 +84,21 @@ class Volume(EncodingCache, BodyVolume):
             depend on B or on the pairs, volsmpl.nn.grouped; on this 2-core CPU 1.3-2.5x slower than 'tiles', as
             its activations leave the cache). 'grouped' falls back to 'tiles' where the network or dtype has no
             grouped matmul (COAP, float64, float32 on CUDA).
+        precision: the decoders' arithmetic on the sparse path: 'full' (default: the volume's dtype), 'bf16'
+            (bfloat16 layers on the grouped engine, whatever pair_decoder says: positional encoding in full
+            precision, then it and the per-(body, part) matrices rounded to bfloat16, fp32 accumulation; networks
+            with a grouped decoder only) or 'tf32' (CUDA only: float32 matmuls on TF32 tensor cores while the
+            decoders run). Change it with `set_precision`. The dense reference path always runs in full precision.
     """
 
     ENGINES = ("lean", "chunked")
     PAIR_DECODERS = ("tiles", "grouped")
+    PRECISIONS = ("full", "bf16", "tf32")
     LEAN_FACTOR = 4
 
     def __init__(self, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
-                 dense: bool = False, chunk_elems: int = 1 << 21, engine: str = "lean", pair_decoder: str = "tiles"):
+                 dense: bool = False, chunk_elems: int = 1 << 21, engine: str = "lean", pair_decoder: str = "tiles",
+                 precision: str = "full"):
         super().__init__()
         self.net = net
         self.partition = partition
@@ -86,6 +114,7 @@ class Volume(EncodingCache, BodyVolume):
         self._last: Encoding | None = None
         self.decoder_evaluations = 0  # (point, part) decoder evaluations so far, for tests and benchmarks
         self.kind = kind_of_network(net)  # the registry's name of this model ('volsmpl', 'coap')
+        self.set_precision(precision)
 
     def _frames(self, out):
         """Part transforms G (B, K, 4, 4) and padded part boxes (B, K, 3) x2 of a body output: no network."""
@@ -204,9 +233,33 @@ class Volume(EncodingCache, BodyVolume):
             vals = self._decode_xin(enc, xin, b, kc)
         return vals * sc[:, 0] if norm else vals
 
+    def set_precision(self, precision: str) -> "Volume":
+        """Set the decoders' arithmetic ('full', 'bf16' or 'tf32'; see the class docstring); returns self.
+        ValueError (one line, with the fix) for a precision this network or torch cannot run."""
+        if precision not in self.PRECISIONS:
+            raise ValueError(f"precision must be one of {self.PRECISIONS}, got {precision!r}")
+        if precision == "bf16" and not (model_kind(self.kind).grouped
+                                        and self.net.grouped_supported(torch.bfloat16)):
+            raise ValueError(f"precision 'bf16' needs a grouped decoder in bfloat16, which the {self.kind} network "
+                             f"{'has not' if not model_kind(self.kind).grouped else 'cannot run in this torch'}; "
+                             f"use precision 'full'")
+        self.precision = precision
+        return self
+
     def _decode_xin(self, enc: Encoding, xin: torch.Tensor, b: torch.Tensor, kc: torch.Tensor) -> torch.Tensor:
-        """Decoder inputs xin (M, 3) of pairs of body b (M,) and code part kc (M,) -> (M,), by pair_decoder."""
-        if not self._grouped_ok(xin):
+        """Decoder inputs xin (M, 3) of pairs of body b (M,) and code part kc (M,) -> (M,), by pair_decoder and
+        precision."""
+        if self.precision == "tf32":
+            if xin.device.type != "cuda":
+                raise ValueError(f"precision 'tf32' runs on CUDA tensor cores, but the query is on {xin.device.type}; "
+                                 f"use precision 'full' or 'bf16' there")
+            with tf32_matmuls():
+                return self._decode_by_engine(enc, xin, b, kc)
+        return self._decode_by_engine(enc, xin, b, kc)
+
+    def _decode_by_engine(self, enc: Encoding, xin: torch.Tensor, b: torch.Tensor, kc: torch.Tensor) -> torch.Tensor:
+        bf16 = self.precision == "bf16"
+        if not bf16 and not self._grouped_ok(xin):
             return self.net.decode_pairs(xin, b, kc, enc.code)
         if enc.grouped is None or (torch.is_grad_enabled() and enc.code.z.requires_grad
                                    and not enc.grouped[0].requires_grad):  # made without a graph: remake
@@ -215,7 +268,7 @@ class Volume(EncodingCache, BodyVolume):
         group = b * Kc + kc
         order = torch.argsort(group, stable=True)  # no-op order when the pairs come sorted by (body, part)
         offs = torch.cumsum(torch.bincount(group, minlength=Bc * Kc), 0).to(torch.int32)
-        vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped)
+        vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped, torch.bfloat16 if bf16 else None)
         return torch.empty_like(vals).index_put_((order,), vals)
 
     def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0, outside: bool = True) -> torch.Tensor:

@@ -25,10 +25,19 @@ class BodyVolume(torch.nn.Module):
     `query_parts`, `to_signed`, `occupied`, `penetration`, `selfpen_loss` and `extract_mesh`."""
 
     kind: str = ""
+    #: the decoders' arithmetic ('full' here; networks with reduced-precision modes override set_precision)
+    precision: str = "full"
 
     @property
     def device(self) -> torch.device:
         return self.partition.faces.device
+
+    def set_precision(self, precision: str) -> "BodyVolume":
+        """Set the arithmetic of the queries; 'full' is the only mode of this kind (ValueError for another)."""
+        if precision != "full":
+            raise ValueError(f"the {self.kind} volume computes in full precision only, got precision {precision!r}; "
+                             f"use 'full'")
+        return self
 
     @property
     def num_parts(self) -> int:

@@ -398,23 +398,31 @@ class NBWDecoder(nn.Module):
         b = [gen.biases[l].reshape(B * K, self.out_dims[l]) for l in range(self.n_layers)]
         return tuple(augmented_matrices(W, b, self.skip_layers, self.hidden))
 
-    def decode_grouped(self, x_local: torch.Tensor, offs: torch.Tensor, gen: NBWWeights, mats=None) -> torch.Tensor:
+    def decode_grouped(self, x_local: torch.Tensor, offs: torch.Tensor, gen: NBWWeights, mats=None,
+                       compute_dtype: Optional[torch.dtype] = None) -> torch.Tensor:
         """Evaluate group-sorted pairs, each with its own (body, part) decoder: one grouped matmul per layer
         (no padding, no loop over groups; volsmpl.nn.grouped). Equals ``decode_pairs`` on the same pairs.
 
         Shape: x_local (M, 3) rows sorted by group g = body * K + part (part: index into gen's parts),
         offs (B*K,) int32 cumulative group sizes (offs[-1] == M), gen for B x K -> (M,) (out_dim 1) or (M, out_dim).
-        mats: `grouped_matrices(gen)` when already made. Needs `grouped_supported(x_local.dtype)`.
+        mats: `grouped_matrices(gen)` when already made. compute_dtype: run the layers in this dtype (e.g.
+        torch.bfloat16: the positional encoding is computed in x_local's dtype, then it and the layer matrices are
+        rounded to it; the result returns in x_local's dtype). Needs `grouped_supported` of the dtype the layers run in.
         """
         B, K = self._check_gen(gen)
         if x_local.dim() != 2 or x_local.shape[1] != 3:
             raise ValueError(f"decode_grouped expects x_local of shape (M, 3), got {tuple(x_local.shape)}")
         if offs.shape != (B * K,) or offs.dtype != torch.int32:
             raise ValueError(f"decode_grouped expects int32 offs of shape ({B * K},), got {offs.dtype} {tuple(offs.shape)}")
-        if not self.grouped_supported(x_local.dtype, x_local.device):
-            raise TypeError(f"decode_grouped: no grouped matmul for {x_local.dtype} in this torch; use decode_pairs")
+        run = compute_dtype or x_local.dtype
+        if not self.grouped_supported(run, x_local.device):
+            raise TypeError(f"decode_grouped: no grouped matmul for {run} on {x_local.device.type} in this torch; "
+                            f"use decode_pairs")
         mats = self.grouped_matrices(gen) if mats is None else mats
-        h = grouped_mlp(positional_encoding(x_local, self.pe_levels), offs, mats, self.skip_layers)[:, :self.out_dim]
+        p = positional_encoding(x_local, self.pe_levels)
+        if run != x_local.dtype:
+            p, mats = p.to(run), [m.to(run) for m in mats]
+        h = grouped_mlp(p, offs, mats, self.skip_layers)[:, :self.out_dim].to(x_local.dtype)
         return h.squeeze(-1) if self.out_dim == 1 else h
 
     def _mlp_chunks(self, xs: torch.Tensor, Ws, bs) -> torch.Tensor:

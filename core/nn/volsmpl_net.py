@@ -69,9 +69,11 @@ class VolumetricSMPLNet(nn.Module):
         """Per-group layer matrices of a code for `decode_grouped` (once per encoding)."""
         return self.decoder.grouped_matrices(code.weights)
 
-    def decode_grouped(self, x_local: torch.Tensor, offs: torch.Tensor, code: PartCode, mats=None) -> torch.Tensor:
-        """x_local (M, 3) sorted by group body * K' + part, offs (B*K',) int32 cumulative sizes -> (M,)."""
-        return self.decoder.decode_grouped(x_local, offs, code.weights, mats)
+    def decode_grouped(self, x_local: torch.Tensor, offs: torch.Tensor, code: PartCode, mats=None,
+                       compute_dtype=None) -> torch.Tensor:
+        """x_local (M, 3) sorted by group body * K' + part, offs (B*K',) int32 cumulative sizes -> (M,);
+        compute_dtype: the layers' dtype (NBWDecoder.decode_grouped)."""
+        return self.decoder.decode_grouped(x_local, offs, code.weights, mats, compute_dtype)
 
     def flops_per_pair(self) -> int:
         """FLOPs of one (point, part) decoder evaluation (the NBW decoder's)."""
