@@ -12,7 +12,9 @@ The result JSON records where and when it ran under 'meta' (`volsmpl.provenance.
 Models (`MODELS`): 'volsmpl' (sparse engine: decoders only on (point, part) pairs inside part boxes, lean
 query path), 'volsmpl-chunked' (the same on the engine before issue 28: `Volume.engine`, `ENGINES`),
 'volsmpl-dense' (the reference path: every part decoder on every point), 'coap' (COAP as published: every part
-on every point, i.e. dense) and 'coap-sparse' (COAP's network on the sparse engine). A model whose
+on every point, i.e. dense), 'coap-sparse' (COAP's network on the sparse engine), and 'volsmpl-bf16' /
+'volsmpl-tf32' (the sparse engine in a reduced precision, `PRECISIONS`, `Volume.set_precision`; tf32 on CUDA only;
+their accuracy columns are measured in that precision). A model whose
 `attach_volume(body, model=...)` is not available is skipped with a note.
 
 A run measures:
@@ -48,7 +50,7 @@ from .bench_jobs import bodybody_inputs, make_frames, matmul_rate, run_job
 from .bench_report import PAPER, caveats, compute_ratios, format_report, to_markdown
 from .provenance import machine_info
 
-__all__ = ["MODELS", "ENGINES", "BenchConfig", "model_available", "checkpoint_for", "bench_model", "bench_bodybody",
+__all__ = ["MODELS", "ENGINES", "PRECISIONS", "BenchConfig", "model_available", "checkpoint_for", "bench_model", "bench_bodybody",
            "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
            "add_parser", "config_from_args", "run", "PAPER", "compute_ratios", "format_report", "to_markdown"]
 
@@ -59,10 +61,14 @@ MODELS: Dict[str, Tuple[str, bool]] = {
     "coap": ("coap", True),          # COAP as published evaluates every part on every point, in one pass
     "coap-sparse": ("coap", False),  # COAP's network on our sparse engine
     "volsmpl-chunked": ("volsmpl", False),  # the sparse engine before issue 28: padded chunks, dense box distances
+    "volsmpl-bf16": ("volsmpl", False),     # the sparse engine with bfloat16 decoder layers (Volume.set_precision)
+    "volsmpl-tf32": ("volsmpl", False),     # the sparse engine with TF32 matmuls (CUDA only)
 }
 
 #: benchmark model name -> Volume.engine of its sparse path (default 'lean')
 ENGINES: Dict[str, str] = {"volsmpl-chunked": "chunked"}
+#: benchmark model name -> Volume precision (default 'full'); their accuracy is measured in that precision
+PRECISIONS: Dict[str, str] = {"volsmpl-bf16": "bf16", "volsmpl-tf32": "tf32"}
 
 
 @dataclass
@@ -182,7 +188,7 @@ def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optio
     n_frames = max(1, cfg.warmup + cfg.repeats)
     inputs = make_frames(body, batch, cfg.n_points, n_frames, cfg.seed)
     job = {"spec": {"model": model, "dense": dense, "checkpoint": checkpoint, "init_seed": cfg.init_seed,
-                    "engine": ENGINES.get(name, "lean")},
+                    "engine": ENGINES.get(name, "lean"), "precision": PRECISIONS.get(name, "full")},
            "device": cfg.device, "threads": cfg.threads or torch.get_num_threads(), "warmup": cfg.warmup,
            "repeats": cfg.repeats, "budget_s": cfg.budget_s}
     r = run_job("volsmpl.bench_jobs:volume_job", job, inputs, cfg.timeout_s)
@@ -223,20 +229,21 @@ def evaluate_protocol_check(cfg: BenchConfig, checkpoint: Optional[str]) -> dict
     return measure_resources(spec, ecfg)
 
 
-def accuracy(model: str, checkpoint: Optional[str], cfg: BenchConfig) -> dict:
-    """IoU/MSE of a trained base model on the validation set; {'status': 'untrained'} without a checkpoint."""
+def accuracy(model: str, checkpoint: Optional[str], cfg: BenchConfig, precision: str = "full") -> dict:
+    """IoU/MSE of a trained base model on the validation set (its decoders in `precision`); {'status':
+    'untrained'} without a checkpoint."""
     from .checkpoint import checkpoint_model
     from .evaluate import EvalConfig, evaluate_checkpoint
 
     if checkpoint is None:
         return {"status": "untrained"}
-    ecfg = EvalConfig(n_bodies=cfg.n_bodies, n_points=cfg.n_points, device=cfg.device)
+    ecfg = EvalConfig(n_bodies=cfg.n_bodies, n_points=cfg.n_points, device=cfg.device, precision=precision)
     held = checkpoint_model(checkpoint)
     if held != model:
         raise ValueError(f"{checkpoint} holds a {held} model, not {model}; pass it as --checkpoint-{held}")
     res = evaluate_checkpoint(checkpoint, config=ecfg)  # occupancy models: IoU only (MSE None)
     return {"status": "trained", "checkpoint": checkpoint, "metrics": res.metrics, "n_bodies": cfg.n_bodies,
-            "validation_digest": res.validation_digest}
+            "validation_digest": res.validation_digest, "precision": precision}
 
 
 # ---------------------------------------------------------------------------------------------- run
@@ -296,6 +303,8 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
             available[base] = model_available(base)
             ckpts[base] = checkpoint_for(base, cfg) if available[base][0] else None
         ok, why = available[base]
+        if ok and PRECISIONS.get(name) == "tf32" and cfg.device != "cuda":
+            ok, why = False, "TF32 is a CUDA tensor-core mode (run with --device cuda)"
         if not ok:
             result["models"][name] = {"status": "skipped", "note": why}
             result["notes"].append(f"{name}: skipped: {why}")
@@ -320,13 +329,14 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
             log("body-body occupancy (winding numbers vs volsmpl) ...")
             result["bodybody"] = bench_bodybody(cfg, body, ckpts["volsmpl"])
     result["accuracy"] = {}
-    for base, (ok, _) in available.items():
-        if ok:
-            if not cfg.accuracy:
-                result["accuracy"][base] = {"status": "skipped (--quick)"}
-            else:
-                log(f"{base} accuracy ...")
-                result["accuracy"][base] = accuracy(base, ckpts[base], cfg)
+    reduced = [n for n in cfg.models if n in PRECISIONS and result["models"].get(n, {}).get("status") == "ok"]
+    for key, base, precision in [(b, b, "full") for b, (ok, _) in available.items() if ok] + \
+            [(n, MODELS[n][0], PRECISIONS[n]) for n in reduced]:   # reduced precision: its own accuracy
+        if not cfg.accuracy:
+            result["accuracy"][key] = {"status": "skipped (--quick)"}
+        else:
+            log(f"{key} accuracy ...")
+            result["accuracy"][key] = accuracy(base, ckpts[base], cfg, precision)
     result["ratios"] = compute_ratios(result["models"], result.get("bodybody"))
     result["notes"] += caveats(result)
     return result

@@ -193,7 +193,7 @@ def _outside_aten(event) -> bool:
 
 def build_volume(body, spec: dict):
     """The volume a job measures: spec {'model', 'dense', 'checkpoint' (or None: random init), 'init_seed',
-    optional 'engine' (Volume.engine, default 'lean')}."""
+    optional 'engine' (Volume.engine, default 'lean'), optional 'precision' (Volume.set_precision, default 'full')}."""
     from .attach import attach_volume
 
     if spec.get("checkpoint"):
@@ -202,6 +202,7 @@ def build_volume(body, spec: dict):
         torch.manual_seed(int(spec.get("init_seed", 0)))
         vol = attach_volume(body, model=spec["model"], pretrained=False, dense=spec["dense"])
     vol.engine = spec.get("engine", "lean")
+    vol.set_precision(spec.get("precision", "full"))
     if spec["dense"]:
         # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
         # no cache tiling

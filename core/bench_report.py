@@ -24,7 +24,8 @@ PAPER = paper.bench_paper()
 
 #: (numerator, denominator) model pairs whose time and memory ratios are reported per batch size
 RATIO_PAIRS = [("coap", "volsmpl"), ("coap-sparse", "volsmpl"), ("volsmpl-dense", "volsmpl"), ("coap", "coap-sparse"),
-               ("volsmpl-chunked", "volsmpl")]
+               ("volsmpl-chunked", "volsmpl"), ("volsmpl", "volsmpl-bf16"), ("volsmpl", "volsmpl-tf32"),
+               ("coap", "volsmpl-bf16"), ("coap", "volsmpl-tf32")]
 
 
 # ---------------------------------------------------------------------------------------------- ratios
@@ -102,7 +103,8 @@ def model_rows(result: dict) -> Tuple[List[str], List[List[str]]]:
         if e["status"] != "ok":
             rows.append([name, "-", "skipped"] + [""] * (len(head) - 3))
             continue
-        acc = result.get("accuracy", {}).get(e["model"])
+        accs = result.get("accuracy", {})
+        acc = accs.get(name, accs.get(e["model"]))   # a reduced-precision model has its own
         skipped = e.get("skipped_batches", {})
         for batch in sorted(set(e["batches"]) | set(skipped), key=int):
             if batch in skipped:

@@ -140,3 +140,27 @@ def test_budget_rules():
     assert fit_budget(2, 5, 500.0, 120.0) == (0, 1)  # always at least one timed run
     assert estimate_call_s({}, 8) is None
     assert estimate_call_s({"1": {"t_ms": 2000.0}}, 8) == pytest.approx(16.0)
+
+
+def test_reduced_precision_models(tmp_path):
+    """volsmpl-bf16 runs with its volume in bfloat16; volsmpl-tf32 is skipped off CUDA with the reason; the
+    accuracy of a reduced-precision model is measured in that precision."""
+    import torch
+
+    from volsmpl.bench import accuracy, checkpoint_for
+    out = tmp_path / "bench.json"
+    rc = main(["bench", "--points", "2000", "--batch", "1", "--repeats", "1", "--warmup", "0", "--threads", "1",
+               "--models", "volsmpl-bf16,volsmpl-tf32", "--no-bodybody", "--matmul-size", "128", "--quick",
+               "--out", str(out)])
+    assert rc == 0
+    res = json.loads(out.read_text())
+    assert res["models"]["volsmpl-bf16"]["status"] == "ok"
+    assert res["accuracy"]["volsmpl-bf16"]["status"].startswith("skipped")
+    if not torch.cuda.is_available():
+        assert res["models"]["volsmpl-tf32"]["status"] == "skipped"
+        assert "CUDA" in res["models"]["volsmpl-tf32"]["note"]
+    cfg = BenchConfig(n_bodies=1, n_points=3000)
+    ckpt = checkpoint_for("volsmpl", cfg)
+    if ckpt is not None:
+        acc = accuracy("volsmpl", ckpt, cfg, "bf16")
+        assert acc["precision"] == "bf16" and 0.5 < acc["metrics"]["iou_mean"] <= 1.0
