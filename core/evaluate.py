@@ -222,6 +222,7 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
     finally:
         if cfg.precision != before:
             volume.set_precision(before)
+    if not volume.is_sdf:
         for k in [k for k in res.metrics if k.startswith("mse")]:  # not distances: no SDF error to report
             res.metrics[k] = None
             res.per_body[k] = [None] * len(res.per_body[k])

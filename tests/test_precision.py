@@ -75,6 +75,8 @@ def test_evaluation_in_bf16_restores_the_volume(setup):
     low = evaluate_volume(vol, body, cfg, precision="bf16")
     assert vol.precision == "full" and low.config["precision"] == "bf16"
     assert abs(low.metrics["iou_mean"] - full.metrics["iou_mean"]) < 0.01
+    assert full.metrics["mse_sdf"] is not None and "output" not in full.extra     # an SDF keeps its distance columns
+    assert abs(low.metrics["mse_sdf"] - full.metrics["mse_sdf"]) < 0.1 * full.metrics["mse_sdf"]
 
 
 @pytest.mark.cuda
