@@ -28,6 +28,7 @@ from .collision import reduce_penetration
 from .encoding import Encoding, EncodingCache
 from .models import kind_of_network, model_kind
 from .nn.analytic import box_sdf
+from .nn.nbw import group_counts
 from .nn.volsmpl_net import PartCode
 from .partition import Partition
 from .self_penetration import SELFPEN_TAU, overlap_samples, reduce_selfpen, sdf_penalty
@@ -267,7 +268,7 @@ class Volume(EncodingCache, BodyVolume):
         Bc, Kc = enc.code.z.shape[:2]
         group = b * Kc + kc
         order = torch.argsort(group, stable=True)  # no-op order when the pairs come sorted by (body, part)
-        offs = torch.cumsum(torch.bincount(group, minlength=Bc * Kc), 0).to(torch.int32)
+        offs = torch.cumsum(group_counts(group, Bc * Kc), 0).to(torch.int32)   # no host sync
         vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped, torch.bfloat16 if bf16 else None)
         return torch.empty_like(vals).index_put_((order,), vals)
 

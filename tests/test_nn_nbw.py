@@ -315,3 +315,15 @@ def test_decode_grouped_refuses_bad_input():
     with pytest.raises(TypeError, match="decode_pairs"):
         m.double().decode_grouped(torch.zeros(4, 3, dtype=torch.float64), torch.tensor([2, 4], dtype=torch.int32),
                                   m.double().generate(torch.randn(1, 2, 5, dtype=torch.float64)))
+
+
+def test_group_counts_and_a_layout_from_host_counts():
+    """group_counts equals bincount; a layout made from counts the caller fetched equals the one made alone."""
+    from volsmpl.nn.nbw import group_counts
+    g = torch.randint(0, 7, (500,), generator=torch.Generator().manual_seed(1))
+    g[g == 3] = 5                                                   # an empty group
+    c = group_counts(g, 9)
+    assert torch.equal(c, torch.bincount(g, minlength=9)) and c[3] == 0 and c[8] == 0
+    a, b = group_pairs(g, 9, 16), group_pairs(g, 9, 16, c, c.tolist())
+    for x, y in zip(a[:3], b[:3]):
+        assert torch.equal(x, y)

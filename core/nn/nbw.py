@@ -92,7 +92,15 @@ class PairLayout(NamedTuple):
     chunk: int
 
 
-def group_pairs(group: torch.Tensor, n_groups: int, chunk: int) -> PairLayout:
+def group_counts(group: torch.Tensor, n_groups: int) -> torch.Tensor:
+    """Pairs per group, without a host sync (``torch.bincount`` reads the maximum on the host on a GPU).
+
+    Shape: group (M,) int64 in [0, n_groups) -> (n_groups,) int64."""
+    return torch.zeros(n_groups, dtype=torch.long, device=group.device).index_add_(0, group, torch.ones_like(group))
+
+
+def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional[torch.Tensor] = None,
+                counts_host: Optional[list] = None) -> PairLayout:
     """Sort pairs by group and cut every group into chunks of ``chunk`` rows (last one padded).
 
     Each chunk holds pairs of a single group, so a layer is one batched matmul over chunks with
@@ -102,12 +110,14 @@ def group_pairs(group: torch.Tensor, n_groups: int, chunk: int) -> PairLayout:
         group: (M,) int64 group id in [0, n_groups).
         n_groups: number of groups G.
         chunk: rows per chunk (>= 1).
+        counts, counts_host: `group_counts(group, n_groups)` and its values as a list, when the caller has them
+            (the layout then needs no host sync of its own; else one, for the number of chunks).
     Returns:
         :class:`PairLayout`.
     """
     M = group.shape[0]
     dev = group.device
-    counts = torch.bincount(group, minlength=n_groups)                 # (G,)
+    counts = group_counts(group, n_groups) if counts is None else counts   # (G,)
     n_chunks = (counts + (chunk - 1)) // chunk                          # (G,)
     chunk_start = torch.cumsum(n_chunks, 0) - n_chunks
     group_start = torch.cumsum(counts, 0) - counts
@@ -117,7 +127,7 @@ def group_pairs(group: torch.Tensor, n_groups: int, chunk: int) -> PairLayout:
     slot_sorted = (chunk_start[gs] + torch.div(rank, chunk, rounding_mode="floor")) * chunk + rank % chunk
     slot = torch.empty_like(slot_sorted)
     slot[order] = slot_sorted
-    total = int(n_chunks.sum())
+    total = int(n_chunks.sum()) if counts_host is None else sum((c + chunk - 1) // chunk for c in counts_host)
     src = torch.zeros(total * chunk, dtype=torch.long, device=dev)
     src[slot_sorted] = order
     chunk_group = torch.repeat_interleave(torch.arange(n_groups, device=dev), n_chunks)
@@ -350,10 +360,11 @@ class NBWDecoder(nn.Module):
             out = x_local.sum(-1)
             return out if self.out_dim == 1 else out.unsqueeze(-1).expand(0, self.out_dim)
         G = B * K
+        counts = group_counts(group, G)
+        counts_host = counts.tolist()  # the layout's one host sync: chunk size and number of chunks from it
         if chunk is None:
-            n_nonempty = int(torch.unique(group).numel()) if G > 1 else 1
-            chunk = default_chunk(M, n_nonempty)
-        lay = group_pairs(group, G, int(chunk))
+            chunk = default_chunk(M, sum(c > 0 for c in counts_host))
+        lay = group_pairs(group, G, int(chunk), counts, counts_host)
         n_chunks = lay.chunk_group.shape[0]
 
         xs = x_local[lay.src].view(n_chunks, lay.chunk, 3)
