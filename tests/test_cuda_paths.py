@@ -111,3 +111,28 @@ def test_check_device_names():
     if torch.cuda.is_available():
         with pytest.raises(ValueError, match="GPU"):
             check_device(f"cuda:{torch.cuda.device_count()}")
+
+
+@pytest.mark.cuda
+@pytest.mark.parametrize("precision,most", [("full", 3), ("bf16", 1)])
+def test_query_host_syncs_on_cuda(precision, most):
+    """A cached-encoding query on CUDA synchronises with the host at most `most` times: the lean path's one (its
+    two counts), plus, on the full-precision pair decoder, its validation bounds and its layout's counts."""
+    import warnings
+
+    body = volsmpl.create_body().cuda()
+    vol = volsmpl.attach_volume(body).set_precision(precision)
+    with torch.no_grad():
+        out = body(body_pose=torch.zeros(1, 69, device="cuda"))
+        pts = out.vertices.mean(1, keepdim=True) + 0.4 * (torch.rand(1, 5000, 3, device="cuda") - 0.5)
+        vol.query(out, pts)                        # encodes and warms up
+        torch.cuda.synchronize()
+        torch.cuda.set_sync_debug_mode("warn")
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                vol.query(out, pts)
+        finally:
+            torch.cuda.set_sync_debug_mode("default")
+    syncs = [w for w in caught if "synchroniz" in str(w.message)]
+    assert len(syncs) <= most, [str(w.message)[:120] for w in syncs]

@@ -130,7 +130,7 @@ def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional
     total = int(n_chunks.sum()) if counts_host is None else sum((c + chunk - 1) // chunk for c in counts_host)
     src = torch.zeros(total * chunk, dtype=torch.long, device=dev)
     src[slot_sorted] = order
-    chunk_group = torch.repeat_interleave(torch.arange(n_groups, device=dev), n_chunks)
+    chunk_group = torch.repeat_interleave(torch.arange(n_groups, device=dev), n_chunks, output_size=total)
     return PairLayout(src, slot, chunk_group, chunk)
 
 
