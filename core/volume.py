@@ -259,6 +259,7 @@ class Volume(EncodingCache, BodyVolume):
         return self._decode_by_engine(enc, xin, b, kc)
 
     def _decode_by_engine(self, enc: Encoding, xin: torch.Tensor, b: torch.Tensor, kc: torch.Tensor) -> torch.Tensor:
+        """`_decode_xin` on the engine pair_decoder picks; bf16 always takes the grouped one, in bfloat16."""
         bf16 = self.precision == "bf16"
         if not bf16 and not self._grouped_ok(xin):
             return self.net.decode_pairs(xin, b, kc, enc.code)
