@@ -403,7 +403,7 @@ def add_parser(sub):
                         "(calls self-overlaps outside); cached")
     p.add_argument("--cache-dir", default=None, help=f"ground-truth cache (default {default_cache_dir()})")
     p.add_argument("--no-cache", action="store_true", help="recompute the ground truth, do not write the cache")
-    p.add_argument("--precision", default="full", choices=["full", "bf16", "tf32"],
+    p.add_argument("--precision", default="full", choices=list(PRECISIONS),
                    help="decoder arithmetic: full (default), bf16 (bfloat16 layers) or tf32 (CUDA tensor cores); "
                         "reduced precision trades accuracy for speed on GPUs")
     p.add_argument("--out", default=None, help="write the results as JSON here")

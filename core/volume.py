@@ -18,8 +18,6 @@ min over parts; points in no box get the analytic box SDF (paper eq. 4).
 """
 from __future__ import annotations
 
-import contextlib
-
 import torch
 from torch.profiler import record_function
 
@@ -31,31 +29,13 @@ from .nn.analytic import box_sdf
 from .nn.nbw import group_counts
 from .nn.volsmpl_net import PartCode
 from .partition import Partition
+from .precision import PRECISIONS, tf32_matmuls
 from .self_penetration import SELFPEN_TAU, overlap_samples, reduce_selfpen, sdf_penalty
 from .validate import check_points
 from .volume_api import BodyVolume, check_output
 
 #: profiler scope of the decoder evaluations of a query (volsmpl bench times the decoder alone by it)
 DECODER_SCOPE = "volsmpl::decoder"
-
-
-@contextlib.contextmanager
-def tf32_matmuls():
-    """float32 CUDA matmuls on TF32 tensor cores inside the block; the previous setting is restored after it."""
-    m = torch.backends.cuda.matmul
-    new_api = hasattr(m, "fp32_precision")
-    before = m.fp32_precision if new_api else m.allow_tf32
-    try:
-        if new_api:
-            m.fp32_precision = "tf32"
-        else:
-            m.allow_tf32 = True
-        yield
-    finally:
-        if new_api:
-            m.fp32_precision = before
-        else:
-            m.allow_tf32 = before
 
 
 def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -94,7 +74,7 @@ class Volume(EncodingCache, BodyVolume):
 
     ENGINES = ("lean", "chunked")
     PAIR_DECODERS = ("tiles", "grouped")
-    PRECISIONS = ("full", "bf16", "tf32")
+    PRECISIONS = PRECISIONS
     LEAN_FACTOR = 4
 
     def __init__(self, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
