@@ -266,6 +266,11 @@ def tuning_note(t) -> list[str]:
     if not isinstance(t, dict) or not t.get("test_scenes"):
         return []
     choice = ", ".join(f"{m} w = {w:g}" for m, w in (t.get("choice") or {}).items())
-    return ["", f"Rows `*_test`: the test cases only ({', '.join(t['test_scenes'])}), each back-end at the weight "
-                f"that scored best on the tuning cases ({', '.join(t.get('tune_scenes') or [])}): {choice}; "
-                f"criterion: {t.get('criterion', 'not recorded')}."]
+    tune, test = ", ".join(t.get("tune_scenes") or []), ", ".join(t["test_scenes"])
+    crit = t.get("criterion", "not recorded")
+    if t.get("protocol") == "tuned":
+        return ["", f"Protocol 'tuned': the rows named by back-end cover the test cases only ({test}), each at the "
+                    f"weight that scored best on the tuning cases ({tune}): {choice}; rows `*_w<w>` are the sweep "
+                    f"over the tuning cases. Criterion: {crit}."]
+    return ["", f"Rows `*_test`: the test cases only ({test}), each back-end at the weight that scored best on the "
+                f"tuning cases ({tune}): {choice}; criterion: {crit}."]

@@ -68,3 +68,21 @@ def test_test_rows_average_the_test_rooms_at_the_chosen_weight():
     note = " ".join(tuning_note(t))
     assert "room1, room2" in note and "coap w = 1" in note and "criterion" in note
     assert tuning_note(None) == []
+
+
+def test_tuned_protocol_summary_rows():
+    records = {("coap", 0.01): [_rec("room0", 0.50, 0.1)],
+               ("coap", 1.0): [_rec("room0", 0.01, 0.2), _rec("room1", 0.30, 2.0), _rec("room2", 0.10, 1.0)],
+               ("volsmpl", 1.0): [_rec("room0", 0.02, 0.1), _rec("room1", 0.03, 0.2), _rec("room2", 0.05, 0.4)]}
+    cost = {"mem_per_frame_fwd_mb": 1.0, "mem_per_frame_fwdbwd_mb": 2.0, "ms_per_frame_fwd": 3.0,
+            "ms_per_frame_fwdbwd": 4.0, "max_frames_in_budget": 10, "memory_kind": "cpu"}
+    choice = T.choose_weights(records, ["room0"])
+    summary, t = C.tuned_summary(records, choice, ["room0"], ["room1", "room2"], {"coap": cost, "volsmpl": cost},
+                                 {"coap": "all", "volsmpl": "all"}, {"coap": [0.01, 1.0], "volsmpl": [1.0]})
+    assert summary["coap"]["w"] == 1.0 and summary["coap"]["n_sequences"] == 2
+    assert summary["coap"]["goal_dist_m"] == pytest.approx(0.20)
+    assert summary["coap_w0.01"]["n_sequences"] == 1 and summary["coap_w0.01"]["split"] == "tune"
+    assert summary["coap_w1.0"]["goal_dist_m"] == pytest.approx(0.01)       # the tuning room only
+    assert summary["volsmpl"]["goal_dist_m"] == pytest.approx(0.04) and t["protocol"] == "tuned"
+    note = " ".join(tuning_note(t))
+    assert "Protocol 'tuned'" in note and "room1, room2" in note

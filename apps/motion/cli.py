@@ -71,6 +71,10 @@ def add_parser(sub):
     p.add_argument("--published-cost", action="store_true",
                    help="with coap: also the per-frame cost of COAP as published (every part at every scene point, "
                         "no culling), on one frame (GBs of memory): summary row 'coap_published', cost only")
+    p.add_argument("--protocol", default="paper", choices=["paper", "tuned"],
+                   help="'paper' (default): every weight on every room (Tables 5 and D.1; rows <model>_test add the "
+                        "tuning split's view); 'tuned': the weights swept on every third room only, each model's "
+                        "best weight run on the other rooms (the compared rows), a third of the sweep's cost")
     p.add_argument("--render", type=int, default=1, help="frame strips of the first N sequences per scene (0: none)")
     p.add_argument("--out", default="out/motion", help="output folder")
     p.add_argument("--checkpoint-volsmpl", default=None, help="trained VolumetricSMPL checkpoint (default: the shipped one)")
@@ -176,6 +180,44 @@ def format_table(summary: dict) -> str:
     return "\n".join(lines)
 
 
+def _row(recs: list, cost: dict, coll_frames, w: float, **extra) -> dict:
+    """One summary row of a model's records at weight w (its total memory: the peak over the sequences)."""
+    s = summarize(recs, cost, max(r["metrics"]["optim_peak_mem_mb"] for r in recs), coll_frames)
+    return dict(s, w=w, **extra)
+
+
+def paper_summary(records: dict, costs: dict, coll_frames: dict, weights: dict) -> dict:
+    """The paper's protocol (every weight on every room): summary.<model> (Table 5: COAP at w = 0.1, or its first
+    weight without 0.1) and summary.<model>_w<w> (Table D.1's sweep; VolumetricSMPL's w = 1 row beside it)."""
+    summary = {}
+    for (m, w), recs in records.items():
+        s = _row(recs, costs[m], coll_frames[m], w)
+        if len(weights[m]) == 1 or (m == "coap" and w == TABLE5_COAP_W):
+            summary[m] = s
+        if m == "coap" or (m == "volsmpl" and w == 1.0):
+            summary[_wkey(m, w)] = dict(s)
+    if "coap" in weights and "coap" not in summary:   # a sweep without 0.1: Table 5's row is its first weight
+        summary["coap"] = dict(summary[_wkey("coap", weights["coap"][0])])
+    return summary
+
+
+def tuned_summary(records: dict, choice: dict, tune: list, test: list, costs: dict, coll_frames: dict,
+                  weights: dict) -> tuple[dict, dict]:
+    """--protocol tuned: summary.<model> over the test rooms at the weight chosen on the tuning rooms (the rows
+    that compare the models), summary.<model>_w<w> the sweep over the tuning rooms; and the tuning record."""
+    summary = {}
+    for m, c in choice.items():
+        recs = [r for r in records[(m, c["w"])] if r["scene"] in set(test)]
+        summary[m] = _row(recs, costs[m], coll_frames[m], c["w"], split="test")
+        if len(weights[m]) > 1 or (m == "volsmpl" and c["w"] == 1.0):
+            for w in weights[m]:
+                tr = [r for r in records[(m, w)] if r["scene"] in set(tune)]
+                summary[_wkey(m, w)] = _row(tr, costs[m], coll_frames[m], w, split="tune")
+    return summary, {"criterion": CRITERION, "tune_scenes": tune, "test_scenes": test, "protocol": "tuned",
+                     "choice": {m: c["w"] for m, c in choice.items()},
+                     "scores": {m: {f"{w:g}": sc for w, sc in c["scores"].items()} for m, c in choice.items()}}
+
+
 def tuned_rows(summary: dict, records: dict, names: list[str], costs: dict, coll_frames: dict) -> dict | None:
     """Add to `summary` the rows '<model>_test' (the test rooms only, at the weight chosen on the tuning rooms:
     tuning.py) and return the tuning record for results.json; None (no rows) with fewer than two rooms."""
@@ -185,9 +227,8 @@ def tuned_rows(summary: dict, records: dict, names: list[str], costs: dict, coll
     choice = choose_weights(records, tune)
     for m, c in choice.items():
         recs = [r for r in records[(m, c["w"])] if r["scene"] in set(test)]
-        s = summarize(recs, costs[m], max(r["metrics"]["optim_peak_mem_mb"] for r in recs), coll_frames[m])
-        summary[f"{m}_test"] = dict(s, w=c["w"], split="test")
-    return {"criterion": CRITERION, "tune_scenes": tune, "test_scenes": test,
+        summary[f"{m}_test"] = _row(recs, costs[m], coll_frames[m], c["w"], split="test")
+    return {"criterion": CRITERION, "tune_scenes": tune, "test_scenes": test, "protocol": "paper",
             "choice": {m: c["w"] for m, c in choice.items()},
             "scores": {m: {f"{w:g}": sc for w, sc in c["scores"].items()} for m, c in choice.items()}}
 
@@ -224,6 +265,10 @@ def run(args) -> int:
     cf = str(args.coll_frames).strip().lower()
     if cf not in ("auto", "all") and not (cf.isdigit() and int(cf) >= 1):
         raise ValueError(f"--coll-frames must be 'auto', 'all' or a number >= 1, got {args.coll_frames!r}")
+    if args.protocol == "tuned" and (args.scene is not None or str(args.scenes).strip().lower() != "all"
+                                     and int(args.scenes) < 2):
+        raise ValueError("--protocol tuned splits generated rooms into tuning and test rooms: use --scenes 2 or more "
+                         "(not --scene)")
     if args.published_cost and "coap" not in models:
         raise ValueError("--published-cost measures COAP as published: add coap to --model")
     if args.device == "cuda" and not torch.cuda.is_available():
@@ -276,63 +321,70 @@ def run(args) -> int:
     records = {(m, w): [] for m in models for w in weights[m]}
     cases = []
     store = CaseStore(out / "cases", resume=args.resume)
-    for sc in scenes:
+
+    def run_scene(sc, plan) -> None:
+        """Walk every pair of room `sc` for each (model, weight) of `plan`, reusing stored sequences; its figure."""
         paths = {}
         cloud = hashlib.sha256(np.ascontiguousarray(sc.points, dtype=np.float64).tobytes()
                                + np.asarray(sc.floor, dtype=bool).tobytes()).hexdigest()
-        for m in models:
-            for w in weights[m]:
-                cfg = SynthConfig(frames=frames, iters=args.iters, lr=args.lr, residuals=args.residuals,
-                                  floor_in_loss=args.floor_in_loss, coll_frames=coll_frames[m], device=args.device)
-                label = m if len(weights[m]) == 1 else _wkey(m, w)
-                names, keys, recs = [], [], {}
-                for k, (s, g) in enumerate(sc.pairs):
-                    names.append(f"{sc.name}_{k}_{label}")
-                    keys.append(job_key({"config": asdict(cfg), "w": w, "model": m, "scene": sc.name, "cloud": cloud,
-                                         "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(),
-                                         "batch": args.batch},
-                                        modules=[volumes[m]], packages=["volsmpl.apps.motion"]))
-                    rec = store.get(names[k], keys[k])
-                    if rec is not None:
-                        recs[k] = rec
-                for k in sorted(recs):
-                    _print_case(sc.name, k, label, recs[k]["metrics"], reused=True)
-                todo = [k for k in range(len(sc.pairs)) if k not in recs]
-                for i in range(0, len(todo), args.batch):   # the pairs not stored yet, up to --batch at a time
-                    ks = todo[i:i + args.batch]
-                    for k, r in zip(ks, synthesize_batch(model, volumes[m], sc, [sc.pairs[k] for k in ks], w, cfg)):
-                        s, g = sc.pairs[k]
-                        recs[k] = {"scene": sc.name, "sequence": k, "model": m, "w": w, "start": np.asarray(s).tolist(),
-                                   "goal": np.asarray(g).tolist(), "frames": frames, "collision_frames": coll_frames[m],
-                                   "metrics": r["metrics"]}
-                        if k < args.render:
-                            W.render_strip(r["walk"], body.faces, out / f"strip_{names[k]}.png", every=10)
-                        store.put(names[k], keys[k], recs[k])
-                        _print_case(sc.name, k, label, recs[k]["metrics"])
-                for k in range(len(sc.pairs)):
-                    paths.setdefault(label, []).append(np.asarray(recs[k]["metrics"]["pelvis_xz"]))
-                    records[(m, w)].append(recs[k])
-                    cases.append(recs[k])
+        for m, w in plan:
+            cfg = SynthConfig(frames=frames, iters=args.iters, lr=args.lr, residuals=args.residuals,
+                              floor_in_loss=args.floor_in_loss, coll_frames=coll_frames[m], device=args.device)
+            label = m if len(weights[m]) == 1 else _wkey(m, w)
+            names, keys, recs = [], [], {}
+            for k, (s, g) in enumerate(sc.pairs):
+                names.append(f"{sc.name}_{k}_{label}")
+                keys.append(job_key({"config": asdict(cfg), "w": w, "model": m, "scene": sc.name, "cloud": cloud,
+                                     "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(),
+                                     "batch": args.batch},
+                                    modules=[volumes[m]], packages=["volsmpl.apps.motion"]))
+                rec = store.get(names[k], keys[k])
+                if rec is not None:
+                    recs[k] = rec
+            for k in sorted(recs):
+                _print_case(sc.name, k, label, recs[k]["metrics"], reused=True)
+            todo = [k for k in range(len(sc.pairs)) if k not in recs]
+            for i in range(0, len(todo), args.batch):   # the pairs not stored yet, up to --batch at a time
+                ks = todo[i:i + args.batch]
+                for k, r in zip(ks, synthesize_batch(model, volumes[m], sc, [sc.pairs[k] for k in ks], w, cfg)):
+                    s, g = sc.pairs[k]
+                    recs[k] = {"scene": sc.name, "sequence": k, "model": m, "w": w, "start": np.asarray(s).tolist(),
+                               "goal": np.asarray(g).tolist(), "frames": frames, "collision_frames": coll_frames[m],
+                               "metrics": r["metrics"]}
+                    if k < args.render:
+                        W.render_strip(r["walk"], body.faces, out / f"strip_{names[k]}.png", every=10)
+                    store.put(names[k], keys[k], recs[k])
+                    _print_case(sc.name, k, label, recs[k]["metrics"])
+            for k in range(len(sc.pairs)):
+                paths.setdefault(label, []).append(np.asarray(recs[k]["metrics"]["pelvis_xz"]))
+                records[(m, w)].append(recs[k])
+                cases.append(recs[k])
         topdown(sc, paths, sc.pairs, path=out / f"topdown_{sc.name}.png")
 
-    summary = {}
-    for (m, w), recs in records.items():
-        total = max(r["metrics"]["optim_peak_mem_mb"] for r in recs)
-        s = summarize(recs, costs[m], total, coll_frames[m])
-        s["w"] = w
-        if len(weights[m]) == 1 or (m == "coap" and w == TABLE5_COAP_W):
-            summary[m] = s
-        if m == "coap" or (m == "volsmpl" and w == 1.0):
-            summary[_wkey(m, w)] = dict(s)
-    if "coap" not in summary and "coap" in models:   # a sweep without 0.1: Table 5's row is its first weight
-        summary["coap"] = dict(summary[_wkey("coap", weights["coap"][0])])
+    every = [(m, w) for m in models for w in weights[m]]
+    if args.protocol == "tuned":   # the sweep on the tuning rooms, then each model's chosen weight on the others
+        tune, test = split_scenes([sc.name for sc in scenes])
+        for sc in scenes:
+            if sc.name in tune:
+                run_scene(sc, every)
+        choice = choose_weights(records, tune)
+        print("chosen on rooms " + ", ".join(tune) + ": " + ", ".join(f"{m} w={c['w']:g}" for m, c in choice.items()))
+        for sc in scenes:
+            if sc.name in test:
+                run_scene(sc, [(m, choice[m]["w"]) for m in models])
+        summary, tuning = tuned_summary(records, choice, tune, test, costs, coll_frames, weights)
+    else:
+        for sc in scenes:
+            run_scene(sc, every)
+        summary = paper_summary(records, costs, coll_frames, weights)
+        tuning = tuned_rows(summary, records, [sc.name for sc in scenes], costs, coll_frames)
     if PUBLISHED in costs:   # cost columns only: its optimisation would be the 'coap' rows' (same values)
         summary[PUBLISHED] = dict(cost_columns(costs[PUBLISHED]), n_sequences=0)
-    tuning = tuned_rows(summary, records, [sc.name for sc in scenes], costs, coll_frames)
     print()
     print(format_table(summary))
     if tuning:
-        print(f"rows *_test: rooms {', '.join(tuning['test_scenes'])} only, each model at the weight best on rooms "
+        rows = "rows <model>" if args.protocol == "tuned" else "rows *_test"
+        print(f"{rows}: rooms {', '.join(tuning['test_scenes'])} only, each model at the weight best on rooms "
               f"{', '.join(tuning['tune_scenes'])} ({', '.join(f'{m} w={w:g}' for m, w in tuning['choice'].items())}); "
               f"criterion: {tuning['criterion']}")
     print("per-frame cost: the collision term on the full cloud (" + ", ".join(sorted({c["memory_kind"] for c in costs.values()}))
@@ -343,6 +395,7 @@ def run(args) -> int:
                    "coll_frames": coll_frames, "mem_budget_gb": args.mem_budget_gb, "residuals": args.residuals,
                    "floor_in_loss": args.floor_in_loss, "user_scene": args.scene, "device": args.device,
                    "checkpoints": {m: ckpts.get(m, "shipped") for m in models if m != "mesh"}, "batch": args.batch,
+                   "protocol": args.protocol,
                    "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
                                 "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"},
         "summary": summary, "tuning": tuning, "cost": costs,
