@@ -5,7 +5,7 @@ import math
 
 import pytest
 
-from volsmpl.apps.motion import cli as C
+from volsmpl.apps.motion import summary as C
 from volsmpl.apps.motion import tuning as T
 from volsmpl.report_sections import tuning_note
 

@@ -23,15 +23,14 @@ import hashlib
 import json
 import math
 from dataclasses import asdict
-from pathlib import Path
 
 import numpy as np
 import torch
 
-from .tuning import CRITERION, choose_weights, split_scenes
+from .summary import cost_columns, fit_budget, format_table, paper_summary, tuned_rows, tuned_summary, wkey
+from .tuning import choose_weights, split_scenes
 
 PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
-TABLE5_COAP_W = 0.1     # Table 5's COAP row is D.1's w = 0.1 row
 ALL_SCENES = 15
 PUBLISHED = "coap_published"   # summary/cost key of COAP as published (--published-cost)
 
@@ -122,115 +121,10 @@ def parse_weights(items, models) -> dict:
     return out
 
 
-def _wkey(model: str, w: float) -> str:
-    """Summary key of a (model, weight) run: the paper's D.1 row keys ('coap_w0.01', 'coap_w0.1', 'coap_w1.0')."""
-    s = f"{w:g}"
-    return f"{model}_w{s if '.' in s else s + '.0'}"
-
-
 def _print_case(scene: str, k: int, label: str, met: dict, reused: bool = False) -> None:
     print(f"{scene:8s} seq {k} {label:12s} goal {met['goal_dist_m']:.3f} m  collision {met['collision_cm']:.3f} cm "
           f"({met['collision_frames_pct']:.0f}% frames)  skate {met['foot_skate_cm']:.3f} cm  {met['optim_s']:.0f} s"
           + ("  (reused)" if reused else ""), flush=True)
-
-
-def _mean(xs):
-    xs = [x for x in xs if x is not None and np.isfinite(x)]
-    return float(np.mean(xs)) if xs else None
-
-
-def summarize(records: list, cost: dict, total_mem_mb: float, coll_frames) -> dict:
-    keys = ("goal_dist_m", "collision_cm", "collision_obstacles_cm", "collision_frames_pct", "foot_skate_cm",
-            "max_depth_cm", "jerk_max", "path_m", "optim_s", "ms_per_iter")
-    s = {k: _mean([r["metrics"][k] for r in records]) for k in keys}
-    s.update(cost_columns(cost))
-    s.update({"total_mem_mb": total_mem_mb, "n_sequences": len(records),
-              "collision_frames_evaluated": coll_frames, "total_mem_gb": total_mem_mb / 1024})
-    return s
-
-
-def cost_columns(cost: dict) -> dict:
-    """The summary's per-frame cost columns of a `measure_cost` result (Table 5's in the paper's units too)."""
-    return {"mem_per_frame_mb": cost["mem_per_frame_fwd_mb"], "mem_per_frame_fwdbwd_mb": cost["mem_per_frame_fwdbwd_mb"],
-            "ms_per_frame_fwd": cost["ms_per_frame_fwd"], "ms_per_frame_fwdbwd": cost["ms_per_frame_fwdbwd"],
-            "max_frames_in_budget": cost.get("max_frames_in_budget"), "memory_kind": cost["memory_kind"],
-            "frame_mem_gb": cost["mem_per_frame_fwd_mb"] / 1024, "frame_ms": cost["ms_per_frame_fwd"]}
-
-
-def fit_budget(cost: dict, budget_bytes: float) -> str:
-    """Record in `cost` the frames whose forward + backward fit the memory budget; the cost's one-line summary."""
-    fb = cost["mem_per_frame_fwdbwd_mb"] * 2 ** 20
-    cost["max_frames_in_budget"] = int(budget_bytes // fb) if fb > 0 else None
-    return (f"collision term per frame: {cost['ms_per_frame_fwd']:.1f} ms fwd, {cost['ms_per_frame_fwdbwd']:.1f} ms "
-            f"fwd+bwd, {cost['mem_per_frame_fwd_mb']:.1f} MB fwd, {cost['mem_per_frame_fwdbwd_mb']:.1f} MB fwd+bwd; "
-            f"{cost['max_frames_in_budget']} frames fit {budget_bytes / 2 ** 30:g} GB")
-
-
-def format_table(summary: dict) -> str:
-    cols = [("ms_per_frame_fwd", "ms/fr fwd", "{:.1f}"), ("ms_per_frame_fwdbwd", "ms/fr f+b", "{:.1f}"),
-            ("mem_per_frame_mb", "MB/fr fwd", "{:.1f}"), ("mem_per_frame_fwdbwd_mb", "MB/fr f+b", "{:.1f}"),
-            ("total_mem_mb", "total MB", "{:.0f}"), ("max_frames_in_budget", "max fr", "{}"),
-            ("collision_cm", "coll cm", "{:.3f}"), ("collision_frames_pct", "coll fr %", "{:.1f}"),
-            ("goal_dist_m", "goal m", "{:.3f}"), ("foot_skate_cm", "skate cm", "{:.3f}"), ("optim_s", "s/seq", "{:.0f}"),
-            ("n_sequences", "n", "{}")]
-    lines = ["{:14s}".format("run") + " ".join(f"{c[1]:>10s}" for c in cols)]
-    for k, s in summary.items():
-        lines.append(f"{k:14s}" + " ".join(f"{(c[2].format(s[c[0]]) if s.get(c[0]) is not None else '-'):>10s}"
-                                           for c in cols))
-    return "\n".join(lines)
-
-
-def _row(recs: list, cost: dict, coll_frames, w: float, **extra) -> dict:
-    """One summary row of a model's records at weight w (its total memory: the peak over the sequences)."""
-    s = summarize(recs, cost, max(r["metrics"]["optim_peak_mem_mb"] for r in recs), coll_frames)
-    return dict(s, w=w, **extra)
-
-
-def paper_summary(records: dict, costs: dict, coll_frames: dict, weights: dict) -> dict:
-    """The paper's protocol (every weight on every room): summary.<model> (Table 5: COAP at w = 0.1, or its first
-    weight without 0.1) and summary.<model>_w<w> (Table D.1's sweep; VolumetricSMPL's w = 1 row beside it)."""
-    summary = {}
-    for (m, w), recs in records.items():
-        s = _row(recs, costs[m], coll_frames[m], w)
-        if len(weights[m]) == 1 or (m == "coap" and w == TABLE5_COAP_W):
-            summary[m] = s
-        if m == "coap" or (m == "volsmpl" and w == 1.0):
-            summary[_wkey(m, w)] = dict(s)
-    if "coap" in weights and "coap" not in summary:   # a sweep without 0.1: Table 5's row is its first weight
-        summary["coap"] = dict(summary[_wkey("coap", weights["coap"][0])])
-    return summary
-
-
-def tuned_summary(records: dict, choice: dict, tune: list, test: list, costs: dict, coll_frames: dict,
-                  weights: dict) -> tuple[dict, dict]:
-    """--protocol tuned: summary.<model> over the test rooms at the weight chosen on the tuning rooms (the rows
-    that compare the models), summary.<model>_w<w> the sweep over the tuning rooms; and the tuning record."""
-    summary = {}
-    for m, c in choice.items():
-        recs = [r for r in records[(m, c["w"])] if r["scene"] in set(test)]
-        summary[m] = _row(recs, costs[m], coll_frames[m], c["w"], split="test")
-        if len(weights[m]) > 1 or (m == "volsmpl" and c["w"] == 1.0):
-            for w in weights[m]:
-                tr = [r for r in records[(m, w)] if r["scene"] in set(tune)]
-                summary[_wkey(m, w)] = _row(tr, costs[m], coll_frames[m], w, split="tune")
-    return summary, {"criterion": CRITERION, "tune_scenes": tune, "test_scenes": test, "protocol": "tuned",
-                     "choice": {m: c["w"] for m, c in choice.items()},
-                     "scores": {m: {f"{w:g}": sc for w, sc in c["scores"].items()} for m, c in choice.items()}}
-
-
-def tuned_rows(summary: dict, records: dict, names: list[str], costs: dict, coll_frames: dict) -> dict | None:
-    """Add to `summary` the rows '<model>_test' (the test rooms only, at the weight chosen on the tuning rooms:
-    tuning.py) and return the tuning record for results.json; None (no rows) with fewer than two rooms."""
-    if len(names) < 2:
-        return None
-    tune, test = split_scenes(names)
-    choice = choose_weights(records, tune)
-    for m, c in choice.items():
-        recs = [r for r in records[(m, c["w"])] if r["scene"] in set(test)]
-        summary[f"{m}_test"] = _row(recs, costs[m], coll_frames[m], c["w"], split="test")
-    return {"criterion": CRITERION, "tune_scenes": tune, "test_scenes": test, "protocol": "paper",
-            "choice": {m: c["w"] for m, c in choice.items()},
-            "scores": {m: {f"{w:g}": sc for w, sc in c["scores"].items()} for m, c in choice.items()}}
 
 
 def run(args) -> int:
@@ -330,7 +224,7 @@ def run(args) -> int:
         for m, w in plan:
             cfg = SynthConfig(frames=frames, iters=args.iters, lr=args.lr, residuals=args.residuals,
                               floor_in_loss=args.floor_in_loss, coll_frames=coll_frames[m], device=args.device)
-            label = m if len(weights[m]) == 1 else _wkey(m, w)
+            label = m if len(weights[m]) == 1 else wkey(m, w)
             names, keys, recs = [], [], {}
             for k, (s, g) in enumerate(sc.pairs):
                 names.append(f"{sc.name}_{k}_{label}")
