@@ -39,8 +39,10 @@ from .groundtruth import SIGN_MODES
 from .groundtruth_cache import default_cache_dir, ground_truth
 from .meter import Meter, peak_memory, run_isolated, timed_ms
 from .metrics import compute_metrics
+from .precision import PRECISIONS
 from .provenance import machine_info
 from .validation import VAL_SEED, digest, pose_bodies, query_points, validation_bodies, validation_labels
+from .volume_api import BodyVolume
 
 __all__ = ["PAPER_TABLE1", "EvalConfig", "EvalResult", "evaluate", "evaluate_volume", "evaluate_checkpoint",
            "measure_resources", "resource_job", "format_table", "add_parser", "run"]
@@ -210,7 +212,7 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
     which needs `resource_spec` (how the subprocess rebuilds the volume: see measure_resources)."""
     cfg = dataclasses.replace(config or EvalConfig(), **overrides)
     volume = volume.to(torch.device(cfg.device))
-    before = volume.precision
+    before = volume.precision if isinstance(volume, BodyVolume) else "full"   # stand-ins compute as they are
     if cfg.precision != before:
         volume.set_precision(cfg.precision)   # ValueError for a volume without that mode
     try:
