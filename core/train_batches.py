@@ -20,10 +20,10 @@ import torch
 
 from .body.poses import sample_poses
 from .body.shapes import sample_betas
-from .contact_regions import contact_vertices, sample_contact_points
+from .contact_regions import contact_vertices
 from .groundtruth import batch_sdf
 from .train_config import TrainConfig
-from .training_queries import sample_training_queries
+from .training_queries import sample_contact_points, sample_training_queries
 
 
 def _sync(device: torch.device) -> None:

@@ -5,6 +5,7 @@
   whole-body near-surface points; the SDF/occupancy labels come from `volsmpl.groundtruth.batch_mesh_sdf`.
 - `sample_surface`: area-weighted uniform samples on a batch of posed meshes, per part (torch, seeded by a
   `torch.Generator`).
+- `sample_contact_points`: points around the vertices where a body touches itself (`volsmpl.contact_regions`).
 
 Everything runs in float64 on the generator's device; nothing here is differentiable.
 """
@@ -171,3 +172,22 @@ def sample_training_queries(vertices, faces, G, box_min, box_max, n_uniform: int
         dtype = like.dtype if like.is_floating_point() else torch.get_default_dtype()
         return out.to(device=like.device, dtype=dtype)
     return out.numpy().astype(np.asarray(like).dtype if np.issubdtype(np.asarray(like).dtype, np.floating) else np.float64)
+
+
+def sample_contact_points(vertices: torch.Tensor, mask: torch.Tensor, n: int, sigma: float | Sequence[float] = (0.005, 0.01),
+                          generator: torch.Generator | None = None) -> torch.Tensor:
+    """n points per body around its contact vertices (`volsmpl.contact_regions.contact_vertices`): a uniformly drawn
+    contact vertex plus an isotropic Gaussian offset (sigma split as for the near-surface points); a body without
+    contact draws from all its vertices.
+
+    Shape: vertices (B, V, 3), mask (B, V) bool -> (B, n, 3) float64 on the generator's device (else the vertices')."""
+    if mask.shape != vertices.shape[:2]:
+        raise ValueError(f"sample_contact_points: mask {tuple(mask.shape)} does not match vertices {tuple(vertices.shape[:2])}")
+    split = _sigma_split(sigma, n)
+    dev = generator.device if generator is not None else vertices.device
+    f64 = dict(dtype=torch.float64, device=dev)
+    v = vertices.detach().to(**f64)
+    w = mask.to(dev).to(torch.float64)
+    w = torch.where(w.sum(1, keepdim=True) > 0, w, torch.ones_like(w))            # no contact: any vertex
+    idx = torch.multinomial(w, n, replacement=True, generator=generator)          # (B, n)
+    return torch.gather(v, 1, idx[..., None].expand(-1, -1, 3)) + _gaussian_offsets(split, (v.shape[0],), generator, f64)

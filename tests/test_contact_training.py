@@ -11,7 +11,8 @@ import torch
 import volsmpl
 from volsmpl.body.contact_poses import sample_contact_euler
 from volsmpl.body.poses import euler_to_body_pose, named_pose, sample_euler, within_limits
-from volsmpl.contact_regions import contact_vertices, sample_contact_points
+from volsmpl.contact_regions import contact_vertices
+from volsmpl.training_queries import sample_contact_points
 from volsmpl.train_batches import make_batch
 from volsmpl.train_config import TrainConfig
 
