@@ -116,6 +116,11 @@ class EvalConfig:
                              f"must be >= 0 (metres).")
         if self.device not in ("cpu", "cuda") and not str(self.device).startswith("cuda:"):
             raise ValueError(f"EvalConfig.device={self.device!r}: use 'cpu' or 'cuda'.")
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"EvalConfig.precision={self.precision!r}: use one of {', '.join(PRECISIONS)}.")
+        if self.precision == "tf32" and not str(self.device).startswith("cuda"):
+            raise ValueError("precision tf32 runs on CUDA tensor cores: add --device cuda, or use --precision bf16 "
+                             "or full on the CPU.")
 
 
 @dataclass

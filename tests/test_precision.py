@@ -68,6 +68,14 @@ def test_modes_that_cannot_run_are_refused(setup):
     assert mesh.set_precision("full") is mesh
 
 
+def test_tf32_evaluation_off_cuda_is_refused_before_any_work(capsys):
+    from volsmpl.cli import main
+    with pytest.raises(ValueError, match="CUDA"):
+        EvalConfig(precision="tf32")
+    assert main(["eval", "--precision", "tf32", "--n-bodies", "1", "--points", "100"]) == 2
+    assert "--device cuda" in capsys.readouterr().err
+
+
 def test_evaluation_in_bf16_restores_the_volume(setup):
     body, vol, out, pts = setup
     cfg = EvalConfig(n_bodies=1, n_points=4000, use_cache=False)
