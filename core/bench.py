@@ -50,8 +50,8 @@ from .bench_jobs import bodybody_inputs, make_frames, matmul_rate, run_job
 from .bench_report import PAPER, caveats, compute_ratios, format_report, to_markdown
 from .provenance import machine_info
 
-__all__ = ["MODELS", "ENGINES", "PRECISIONS", "BenchConfig", "model_available", "checkpoint_for", "bench_model", "bench_bodybody",
-           "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
+__all__ = ["MODELS", "ENGINES", "PRECISIONS", "BenchConfig", "model_available", "checkpoint_for", "bench_model",
+           "bench_bodybody", "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
            "add_parser", "config_from_args", "run", "PAPER", "compute_ratios", "format_report", "to_markdown"]
 
 #: benchmark model name -> (model given to attach_volume, dense query path)
