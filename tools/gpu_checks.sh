@@ -3,9 +3,13 @@
 #     tools/gpu_checks.sh checks             # cuda-marked tests and selfpen on CUDA
 #     tools/gpu_checks.sh bench              # `volsmpl bench --device cuda` (B = 1, 8; 60k points)
 #     tools/gpu_checks.sh apps               # hoi and motion CLIs on CUDA (small sets: costs and that they run)
-#     tools/gpu_checks.sh train SRC SECONDS  # resume the training run folder SRC on CUDA for about SECONDS
+#     tools/gpu_checks.sh train SRC SECONDS  # resume the training run folder SRC on CUDA for about SECONDS, or start
+#                                            # the phase of config SRC (.json) from $INIT (default: the shipped asset)
 # e.g. SOURCE_COMMIT=<commit> bash tools/gpu_checks.sh train checkpoints/coap_pp 540 (one call; the run's latest
-# checkpoint comes back as $OUT/run.tar: unpack it over checkpoints/coap_pp/ and commit it).
+# checkpoint comes back as $OUT/run.tar, or parts run.tar.00, ... when over 15 MiB: unpack it over
+# checkpoints/coap_pp/ and commit it). A VolumetricSMPL phase starts from its config (train
+# checkpoints/volsmpl_b8q.json 540) and, while the machine stays warm, continues in place (train
+# /tmp/runs/volsmpl_b8q 540): its run folder is too large to travel with the working tree (64 MiB).
 # Make the command end inside the call's 600 s: a run killed by the call's limit returns nothing.
 # Needs: the pure-Python wheels missing there in .whl/ (trimesh, kornia, kornia_rs; see the device README) and
 # SOURCE_COMMIT=<commit> in the environment (results record it). Everything it makes lands in $OUT (default
@@ -55,9 +59,17 @@ apps)  # the interaction database is built on the CPU side of that machine first
     tar czf "$OUT/apps.tgz" -C "$W" . ;;
 train)
     src=${2:?usage: tools/gpu_checks.sh train SRC SECONDS}; secs=${3:?seconds}
-    run=/tmp/runs/$(basename "$src"); rm -rf "$run"; mkdir -p /tmp/runs; cp -r "$src" "$run"
+    mkdir -p /tmp/runs
     end=$((SECONDS + secs))
-    step train_probe 300 $V train --resume --out "$run" --device cuda --max-steps 20
+    if [ "${src%.json}" != "$src" ]; then  # a config: a new phase from ${INIT:-core/assets/volsmpl_anny}
+        run=/tmp/runs/$(basename "${src%.json}"); rm -rf "$run"
+        step train_probe 300 $V train --config "$src" --init "${INIT:-core/assets/volsmpl_anny}" --out "$run" \
+            --device cuda --max-steps 20
+    else                                    # a run folder: resume it (one under /tmp/runs/ in place: a warm machine's)
+        run=/tmp/runs/$(basename "$src")
+        [ "$src" != "$run" ] && { rm -rf "$run"; cp -r "$src" "$run"; }
+        step train_probe 300 $V train --resume --out "$run" --device cuda --max-steps 20
+    fi
     sps=$(tail -n 1 "$run/log.csv" | cut -d, -f6)
     # 0.8: the step time drifts (0.22 -> 0.29 s over one session's chunks); the limit keeps the tarball below
     n=$(python3 -c "print(max(0, int(0.8 * ($end - $SECONDS - 40) / max(float('$sps'), 1e-3))))")
@@ -65,8 +77,13 @@ train)
     [ "$n" -gt 0 ] && step train $((end - SECONDS > 1 ? end - SECONDS : 1)) $V train --resume --out "$run" --device cuda \
         --max-steps "$n"
     latest=$(cat "$run/latest")
-    cp "$run/log.csv" "$W"/*.log "$OUT"/
-    tar cf "$OUT/run.tar" -C "$run" "$latest" config.json log.csv latest ;;
+    cp "$run/log.csv" "$W"/train*.log "$OUT"/   # 8 files come back at most: logs of this mode only
+    tar cf "$OUT/run.tar" -C "$run" "$latest" config.json log.csv latest
+    # files come back up to 16 MiB each (a VolumetricSMPL checkpoint with its average and Adam state is ~55 MB):
+    # parts of 15 MiB, joined with `cat run.tar.* | tar x`
+    if [ "$(stat -c %s "$OUT/run.tar")" -gt $((15 * 1024 * 1024)) ]; then
+        split -b 15M -d "$OUT/run.tar" "$OUT/run.tar." && rm "$OUT/run.tar"
+    fi ;;
 *)
     echo "usage: tools/gpu_checks.sh checks|bench|apps|train SRC SECONDS" >&2; exit 2 ;;
 esac
