@@ -21,11 +21,13 @@ def wkey(model: str, w: float) -> str:
 
 
 def _mean(xs):
+    """Mean of the finite values of xs; None when there are none."""
     xs = [x for x in xs if x is not None and np.isfinite(x)]
     return float(np.mean(xs)) if xs else None
 
 
 def summarize(records: list, cost: dict, total_mem_mb: float, coll_frames) -> dict:
+    """One row: the means of the records' metrics, the cost columns, the total memory and the sequence count."""
     keys = ("goal_dist_m", "collision_cm", "collision_obstacles_cm", "collision_frames_pct", "foot_skate_cm",
             "max_depth_cm", "jerk_max", "path_m", "optim_s", "ms_per_iter")
     s = {k: _mean([r["metrics"][k] for r in records]) for k in keys}
@@ -53,6 +55,7 @@ def fit_budget(cost: dict, budget_bytes: float) -> str:
 
 
 def format_table(summary: dict) -> str:
+    """The summary rows as the fixed-width text table the CLI prints."""
     cols = [("ms_per_frame_fwd", "ms/fr fwd", "{:.1f}"), ("ms_per_frame_fwdbwd", "ms/fr f+b", "{:.1f}"),
             ("mem_per_frame_mb", "MB/fr fwd", "{:.1f}"), ("mem_per_frame_fwdbwd_mb", "MB/fr f+b", "{:.1f}"),
             ("total_mem_mb", "total MB", "{:.0f}"), ("max_frames_in_budget", "max fr", "{}"),
