@@ -29,7 +29,7 @@ from .nn.analytic import box_sdf
 from .nn.nbw import group_counts
 from .nn.volsmpl_net import PartCode
 from .partition import Partition
-from .precision import PRECISIONS, tf32_matmuls
+from .precision import check_precision, matmul_precision
 from .self_penetration import SELFPEN_TAU, overlap_samples, reduce_selfpen, sdf_penalty
 from .validate import check_points
 from .volume_api import BodyVolume, check_output
@@ -65,16 +65,12 @@ class Volume(EncodingCache, BodyVolume):
             depend on B or on the pairs, volsmpl.nn.grouped; on this 2-core CPU 1.3-2.5x slower than 'tiles', as
             its activations leave the cache). 'grouped' falls back to 'tiles' where the network or dtype has no
             grouped matmul (COAP, float64, float32 on CUDA).
-        precision: the decoders' arithmetic on the sparse path: 'full' (default: the volume's dtype), 'bf16'
-            (bfloat16 layers on the grouped engine, whatever pair_decoder says: positional encoding in full
-            precision, then it and the per-(body, part) matrices rounded to bfloat16, fp32 accumulation; networks
-            with a grouped decoder only) or 'tf32' (CUDA only: float32 matmuls on TF32 tensor cores while the
-            decoders run). Change it with `set_precision`. The dense reference path always runs in full precision.
+        precision: the decoders' arithmetic on the sparse path, 'full' (default), 'bf16' or 'tf32' (volsmpl.precision;
+            `set_precision`). The dense reference path always runs in full precision.
     """
 
     ENGINES = ("lean", "chunked")
     PAIR_DECODERS = ("tiles", "grouped")
-    PRECISIONS = PRECISIONS
     LEAN_FACTOR = 4
 
     def __init__(self, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
@@ -217,41 +213,27 @@ class Volume(EncodingCache, BodyVolume):
     def set_precision(self, precision: str) -> "Volume":
         """Set the decoders' arithmetic ('full', 'bf16' or 'tf32'; see the class docstring); returns self.
         ValueError (one line, with the fix) for a precision this network or torch cannot run."""
-        if precision not in self.PRECISIONS:
-            raise ValueError(f"precision must be one of {self.PRECISIONS}, got {precision!r}")
-        if precision == "bf16" and not (model_kind(self.kind).grouped
-                                        and self.net.grouped_supported(torch.bfloat16)):
-            raise ValueError(f"precision 'bf16' needs a grouped decoder in bfloat16, which the {self.kind} network "
-                             f"{'has not' if not model_kind(self.kind).grouped else 'cannot run in this torch'}; "
-                             f"use precision 'full'")
+        check_precision(precision, self.kind, model_kind(self.kind).grouped,
+                        model_kind(self.kind).grouped and self.net.grouped_supported(torch.bfloat16))
         self.precision = precision
         return self
 
     def _decode_xin(self, enc: Encoding, xin: torch.Tensor, b: torch.Tensor, kc: torch.Tensor) -> torch.Tensor:
-        """Decoder inputs xin (M, 3) of pairs of body b (M,) and code part kc (M,) -> (M,), by pair_decoder and
-        precision."""
-        if self.precision == "tf32":
-            if xin.device.type != "cuda":
-                raise ValueError(f"precision 'tf32' runs on CUDA tensor cores, but the query is on {xin.device.type}; "
-                                 f"use precision 'full' or 'bf16' there")
-            with tf32_matmuls():
-                return self._decode_by_engine(enc, xin, b, kc)
-        return self._decode_by_engine(enc, xin, b, kc)
-
-    def _decode_by_engine(self, enc: Encoding, xin: torch.Tensor, b: torch.Tensor, kc: torch.Tensor) -> torch.Tensor:
-        """`_decode_xin` on the engine pair_decoder picks; bf16 always takes the grouped one, in bfloat16."""
+        """Decoder inputs xin (M, 3) of pairs of body b (M,) and code part kc (M,) -> (M,), on the engine
+        pair_decoder picks, in `precision` (bf16 always takes the grouped engine, in bfloat16)."""
         bf16 = self.precision == "bf16"
-        if not bf16 and not self._grouped_ok(xin):
-            return self.net.decode_pairs(xin, b, kc, enc.code)
-        if enc.grouped is None or (torch.is_grad_enabled() and enc.code.z.requires_grad
-                                   and not enc.grouped[0].requires_grad):  # made without a graph: remake
-            enc.grouped = self.net.grouped_matrices(enc.code)
-        Bc, Kc = enc.code.z.shape[:2]
-        group = b * Kc + kc
-        order = torch.argsort(group, stable=True)  # no-op order when the pairs come sorted by (body, part)
-        offs = torch.cumsum(group_counts(group, Bc * Kc), 0).to(torch.int32)   # no host sync
-        vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped, torch.bfloat16 if bf16 else None)
-        return torch.empty_like(vals).index_put_((order,), vals)
+        with matmul_precision(self.precision, xin.device):
+            if not bf16 and not self._grouped_ok(xin):
+                return self.net.decode_pairs(xin, b, kc, enc.code)
+            if enc.grouped is None or (torch.is_grad_enabled() and enc.code.z.requires_grad
+                                       and not enc.grouped[0].requires_grad):  # made without a graph: remake
+                enc.grouped = self.net.grouped_matrices(enc.code)
+            Bc, Kc = enc.code.z.shape[:2]
+            group = b * Kc + kc
+            order = torch.argsort(group, stable=True)  # no-op order when the pairs come sorted by (body, part)
+            offs = torch.cumsum(group_counts(group, Bc * Kc), 0).to(torch.int32)   # no host sync
+            vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped, torch.bfloat16 if bf16 else None)
+            return torch.empty_like(vals).index_put_((order,), vals)
 
     def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0, outside: bool = True) -> torch.Tensor:
         """`query` values of an SDF model on the lean sparse path, for bodies b0 .. b0 + B of the encoding.
