@@ -1,5 +1,6 @@
 """Missing heavy packages (volsmpl.deps): one error naming the feature and the fix, reported by the CLI as a user
-error (one line, exit 2), on a real path that needs open3d (a room's line-of-sight test)."""
+error (one line, exit 2), on a real path that needs open3d (groundtruth.mesh_sdf's distances to a room mesh; a
+room's line-of-sight test has a torch path now, tests/test_egohmr_no_open3d.py)."""
 from __future__ import annotations
 
 import sys
@@ -20,17 +21,19 @@ def test_open3d_missing_names_the_feature_and_the_fix(monkeypatch):
 def test_a_room_without_open3d_fails_in_one_line_at_the_cli(monkeypatch, capsys):
     from volsmpl.apps.motion import cli as motion_cli
     from volsmpl.cli import main
+    from volsmpl.groundtruth import mesh_sdf
     from volsmpl.scene import make_room
 
     room = make_room(0)
     monkeypatch.setitem(sys.modules, "open3d", None)
 
-    def run(args):  # a subcommand that places a camera in a room (occlusion test by ray casting)
-        room.sample_viewpoint(np.asarray(room.bounds).mean(axis=0), seed=1)
+    def run(args):  # a subcommand that measures signed distances to a room mesh (open3d's BVH and ray casts)
+        m = room.mesh()
+        mesh_sdf(m.vertices, m.faces, np.asarray(room.bounds).mean(axis=0, keepdims=True))
         return 0
 
     monkeypatch.setattr(motion_cli, "run", run)
     assert main(["motion"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("volsmpl motion: error: ") and "line-of-sight" in err and "pip install" in err
+    assert err.startswith("volsmpl motion: error: ") and "mesh distances" in err and "pip install" in err
     assert "\n" not in err and "internal error" not in err

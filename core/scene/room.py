@@ -8,8 +8,8 @@ thick; no ceiling. Its methods give:
   item labels), `render_meshes` (coloured meshes for `volsmpl.render`, optional cutaway);
 - affordances: `seats`, `walls`, `supports`;
 - free space: `clearance` (exact horizontal distance to the nearest floor item's footprint or wall, 0 inside),
-  `free_grid` on a GRID_CELL (5 cm) grid, `path_clearance`, `sample_start_goal`, `sample_viewpoint` (with an
-  open3d line-of-sight test).
+  `free_grid` on a GRID_CELL (5 cm) grid, `path_clearance`, `sample_start_goal`, `sample_viewpoint` (with a
+  line-of-sight test: open3d's ray cast, or `volsmpl.mesh_query.first_hits` in torch where open3d does not import).
 
 The layout generator that places the items is in `furnish.py`; seeds, `make_room` and the cached scene cloud in
 `rooms.py`.
@@ -274,8 +274,9 @@ class Room:
                          clearance: float = 0.2, occlusion: bool = True) -> np.ndarray:
         """A camera position for an egocentric/third-person view of `target`: at a horizontal distance in
         `distance`, a height in `height` above the floor, inside the room, farther than `clearance` from furniture
-        and walls, with a clear line of sight to within 0.25 m of the target (occlusion=True, open3d ray cast
-        against the room mesh). Shape: target (3,) -> eye (3,). Raises ValueError when none is found."""
+        and walls, with a clear line of sight to within 0.25 m of the target (occlusion=True, a ray cast
+        against the room mesh: open3d, or torch's exact `first_hits` without open3d).
+        Shape: target (3,) -> eye (3,). Raises ValueError when none is found."""
         tgt = np.asarray(target, dtype=np.float64).reshape(3)
         rng = np.random.default_rng(seed)
         for _ in range(300):
@@ -290,17 +291,27 @@ class Room:
                          f"distance range or lower the clearance.")
 
     def _line_of_sight(self, eye: np.ndarray, target: np.ndarray, slack: float = 0.25) -> bool:
-        from ..deps import open3d
-        o3d = open3d("the room's line-of-sight test (camera placement)")
-
+        """Whether the ray from eye towards target meets the room mesh no nearer than `slack` before the target:
+        open3d's ray cast (float32) where open3d imports, else `volsmpl.mesh_query.first_hits` (exact, float64)."""
+        from ..deps import open3d_or_none
+        o3d = open3d_or_none()
+        d = target - eye
+        dist = np.linalg.norm(d)
+        if o3d is None:
+            import torch
+            from ..mesh_query import first_hits
+            if "ray_triangles" not in self._cache:
+                m = self.mesh()
+                self._cache["ray_triangles"] = torch.as_tensor(np.asarray(m.vertices, np.float64)[m.faces])
+            ray = torch.as_tensor(np.stack([eye, d / dist]).astype(np.float64))
+            t_hit = float(first_hits(self._cache["ray_triangles"], ray[:1], ray[1:])[0])
+            return bool(t_hit >= dist - slack)
         if "rays" not in self._cache:
             m = self.mesh()
             scene = o3d.t.geometry.RaycastingScene()
             scene.add_triangles(o3d.core.Tensor(m.vertices.astype(np.float32)),
                                 o3d.core.Tensor(m.faces.astype(np.uint32)))
             self._cache["rays"] = scene
-        d = target - eye
-        dist = np.linalg.norm(d)
         ray = np.concatenate([eye, d / dist]).astype(np.float32)[None]
         t_hit = self._cache["rays"].cast_rays(o3d.core.Tensor(ray))["t_hit"].numpy()[0]
         return bool(t_hit >= dist - slack)
