@@ -5,7 +5,9 @@
 - `pa_mpjpe`: the error after a similarity Procrustes alignment of the 24 joints (mm);
 - `collision_ratio`: fraction of the frame's scene points (the 2 x 2 m cube around the body used for guidance)
   inside the predicted body mesh, by the exact winding-number test (the same test for every guide, so rows compare);
-- `contact`: whether a body vertex lies within 2 cm of the scene mesh (exact distance, open3d) or inside it.
+- `contact`: whether a body vertex lies within 2 cm of the scene mesh (exact distance, open3d) or inside it
+  (open3d's occupancy: ray parity); where open3d does not import, both by `volsmpl.mesh_query.MeshQuery` (exact
+  float64 distances to the faces near the body, exact integer winding number >= 1 of the room's closed components).
 
     e = mpjpe(pred_joints, gt_joints)                  # (B, 24) mm
     r = collision_ratio(vertices, faces, points)       # (B,) in [0, 1]
@@ -16,8 +18,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from volsmpl.deps import open3d
+from volsmpl import deps
 from volsmpl.mesh_distance import winding_numbers
+from volsmpl.mesh_query import MeshQuery
 
 
 def mpjpe(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
@@ -55,13 +58,32 @@ def collision_ratio(vertices: torch.Tensor, faces: torch.Tensor, points: torch.T
                         for b in range(len(vertices))])
 
 
+def _contact_exact(vertices: np.ndarray, mesh, threshold: float) -> bool:
+    """Whether a vertex (V, 3) is within `threshold` of the mesh or inside it (winding number >= 1), by MeshQuery
+    on the CPU: distances only to the faces whose bounding box comes within `threshold` of the vertices' box (the
+    others are farther than that from every vertex), winding numbers against the whole mesh."""
+    v = np.asarray(mesh.vertices, np.float64)
+    f = np.asarray(mesh.faces, np.int64)
+    q = torch.as_tensor(vertices)
+    lo, hi = vertices.min(0) - threshold, vertices.max(0) + threshold
+    tri = v[f]
+    near = ((tri.max(1) >= lo) & (tri.min(1) <= hi)).all(1)
+    if near.any() and bool((MeshQuery(torch.as_tensor(v), torch.as_tensor(f[near]), cluster_size=8).distances(q)
+                            <= threshold).any()):
+        return True
+    return bool((MeshQuery(torch.as_tensor(v), torch.as_tensor(f), cluster_size=8).winding_numbers(q) >= 1).any())
+
+
 def contact(vertices: np.ndarray, scenes: list, threshold: float = 0.02) -> np.ndarray:
     """Whether some body vertex is within `threshold` metres of the scene mesh or inside one of its closed
-    components. Shape: vertices (B, V, 3), scenes: B trimesh meshes -> (B,) bool."""
-    o3d = open3d("the egohmr contact metric")
-
+    components. Shape: vertices (B, V, 3), scenes: B trimesh meshes -> (B,) bool.
+    open3d where it imports, else MeshQuery on the CPU (module docstring)."""
+    o3d = deps.open3d_or_none()
     out = np.zeros(len(vertices), dtype=bool)
     for b, mesh in enumerate(scenes):
+        if o3d is None:
+            out[b] = _contact_exact(np.asarray(vertices[b], np.float64), mesh, threshold)
+            continue
         rc = o3d.t.geometry.RaycastingScene()
         rc.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
                          o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))

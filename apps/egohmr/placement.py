@@ -11,9 +11,10 @@
 - 'reaching_shelf': standing in front of a shelf, one palm brought in front of its opening (inverse kinematics);
 - 'lying': supine on a bed, head below the pillows, lowered onto the mattress until it touches.
 
-Every placement is checked exactly (`penetration`): no body vertex inside a closed scene component (winding number
-counted along rays, open3d) and no scene point (the room's vertices and its dense surface sample `room_cloud`, 1 point
-per cm²) inside the posed body, deeper than PEN_TOL; the support parts (SUPPORT) within CONTACT_TOL of their support.
+Every placement is checked exactly (`penetration`, room_checks.py: winding numbers by libigl and open3d, or by
+torch's MeshQuery where they do not import): no body vertex inside a closed scene component and no scene point
+(the room's vertices and its dense surface sample `room_cloud`, 1 point per cm²) inside the posed body, deeper
+than PEN_TOL; the support parts (SUPPORT) within CONTACT_TOL of their support.
 A placement that fails is drawn again. Conventions: world Y up, metres; body frame as `apps/hoi/rig.py` (facing +Z).
 """
 from __future__ import annotations

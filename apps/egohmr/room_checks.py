@@ -6,15 +6,23 @@
 - `penetration`: the deepest body vertex inside a closed scene component (`RoomSolids`: boxes for the floor slab
   and walls, libigl's generalised winding number for the items) and the deepest scene point inside the body
   (`BodyMesh`: winding numbers counted along 3 rays, open3d); `surface_distance`: the smallest distance to a mesh.
+
+Where open3d does not import (e.g. a CUDA machine without it), the ray counts and distances are those of
+`volsmpl.mesh_query.MeshQuery` (exact integer winding numbers by signed ray crossings, exact float64 distances,
+torch on the CPU); where libigl does not import, an item's inside test is MeshQuery's winding number >= 1, which
+equals libigl's generalised winding number > 1/2 off the surface of a closed item. The answers agree with open3d's
+and libigl's up to open3d's float32 distances (~1e-7 m).
 """
 from __future__ import annotations
 
 from functools import lru_cache
 
 import numpy as np
+import torch
 
-from volsmpl.deps import open3d
+from volsmpl import deps
 from volsmpl.groundtruth import raycasting_scene
+from volsmpl.mesh_query import MeshQuery
 from volsmpl.scene import cached, make_room, sample_surface
 
 CLOUD_DENSITY = 1e4  # room_cloud: points per square metre of visible surface (1 per cm²)
@@ -64,10 +72,9 @@ _RAY_DIRS = np.random.default_rng(20251124).normal(size=(3, 3))
 _RAY_DIRS /= np.linalg.norm(_RAY_DIRS, axis=1, keepdims=True)
 
 
-def _winding(scene, normals: np.ndarray, p: np.ndarray) -> np.ndarray:
+def _winding(o3d, scene, normals: np.ndarray, p: np.ndarray) -> np.ndarray:
     """(N,) integer winding numbers of p (N, 3) w.r.t. the closed mesh in an open3d scene (face normals (F, 3)):
     signed crossings along 3 fixed rays, median (as volsmpl.groundtruth.ray_winding_number, on a prebuilt scene)."""
-    o3d = open3d("the egohmr room checks (ray casts and distances)")
     o = np.ascontiguousarray(p, dtype=np.float32)
     per_ray = []
     for d in _RAY_DIRS:
@@ -78,39 +85,75 @@ def _winding(scene, normals: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.median(np.stack(per_ray), axis=0)
 
 
+def _query(vertices, faces) -> MeshQuery:
+    """MeshQuery of a mesh given as numpy arrays, on the CPU in float64."""
+    return MeshQuery(torch.as_tensor(np.asarray(vertices, np.float64)), torch.as_tensor(np.asarray(faces, np.int64)))
+
+
+def _tensor(p: np.ndarray) -> torch.Tensor:
+    """Points (N, 3) as a float64 CPU tensor."""
+    return torch.as_tensor(np.asarray(p, np.float64))
+
+
 class BodyMesh:
-    """A closed triangle mesh with its open3d scene: winding numbers and distances of points."""
+    """A closed triangle mesh: winding numbers and distances of points, by open3d's scene (ray casts, BVH) where
+    open3d imports, else by MeshQuery (exact, torch on the CPU)."""
 
     def __init__(self, vertices, faces):
         v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
-        self.scene = raycasting_scene(v, f)
-        self.normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        self.o3d = deps.open3d_or_none()
+        if self.o3d is None:
+            self.query = _query(v, f)
+        else:
+            self.scene = raycasting_scene(v, f)
+            self.normals = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+
+    def winding(self, p: np.ndarray) -> np.ndarray:
+        """(N,) integer winding numbers of p (N, 3) (float64 values)."""
+        if self.o3d is None:
+            return self.query.winding_numbers(_tensor(p)).double().numpy()
+        return _winding(self.o3d, self.scene, self.normals, p)
+
+    def distances(self, p: np.ndarray) -> np.ndarray:
+        """(N,) unsigned distances (m) of p (N, 3) to the mesh."""
+        if self.o3d is None:
+            return self.query.distances(_tensor(p)).numpy()
+        return self.scene.compute_distance(self.o3d.core.Tensor(np.asarray(p, np.float32))).numpy()
 
     def depth(self, p: np.ndarray) -> float:
         """Deepest point of p (N, 3) inside the mesh (winding >= 1), metres; 0 when none is inside."""
         if not len(p):
             return 0.0
-        ins = _winding(self.scene, self.normals, p) >= 1
+        ins = self.winding(p) >= 1
         if not ins.any():
             return 0.0
-        o3d = open3d("the egohmr room checks (penetration depth)")
-        return float(self.scene.compute_distance(o3d.core.Tensor(p[ins].astype(np.float32))).numpy().max())
+        return float(self.distances(p[ins]).max())
 
 
 class RoomSolids:
     """The closed components of a room for inside tests: the floor slab and walls (axis-aligned boxes: inside =
     strictly within the bounds) and the items (libigl's exact generalised winding number of the item's faces above
     1/2: robust to the coplanar faces where components touch, which break ray counting, e.g. a mattress on its
-    frame or a chair foot on the floor)."""
+    frame or a chair foot on the floor; without libigl MeshQuery's exact integer winding number >= 1, whose
+    crossings of coplanar faces are decided exactly)."""
 
     def __init__(self, room):
         self.boxes = [m.bounds for _, m in room.structure()]
         self.items = [(it.mesh.bounds, it.mesh) for it in room.items]
-        self._scenes = {}
+        self._meshes, self._queries = {}, {}
+
+    def inside(self, k: int, q: np.ndarray) -> np.ndarray:
+        """(M,) bool: the points q (M, 3) inside item k."""
+        mesh = self.items[k][1]
+        if deps.igl_or_none() is not None:
+            from volsmpl.groundtruth import winding_number
+            return winding_number(mesh.vertices, mesh.faces, q) > 0.5
+        if k not in self._queries:
+            self._queries[k] = _query(mesh.vertices, mesh.faces)
+        return self._queries[k].winding_numbers(_tensor(q)).numpy() >= 1
 
     def depth(self, p: np.ndarray) -> float:
         """Deepest point of p (N, 3) inside a component, metres (0 when none is inside)."""
-        from volsmpl.groundtruth import winding_number
         deepest = 0.0
         for lo, hi in self.boxes:
             d = np.minimum(p - lo, hi - p).min(1)
@@ -120,13 +163,11 @@ class RoomSolids:
             q = p[((p > lo) & (p < hi)).all(1)]
             if not len(q):
                 continue
-            ins = q[winding_number(mesh.vertices, mesh.faces, q) > 0.5]
+            ins = q[self.inside(k, q)]
             if len(ins):
-                o3d = open3d("the egohmr room checks (penetration depth)")
-                if k not in self._scenes:
-                    self._scenes[k] = raycasting_scene(mesh.vertices, mesh.faces)
-                dist = self._scenes[k].compute_distance(o3d.core.Tensor(ins.astype(np.float32))).numpy()
-                deepest = max(deepest, float(dist.max()))
+                if k not in self._meshes:
+                    self._meshes[k] = BodyMesh(mesh.vertices, mesh.faces)
+                deepest = max(deepest, float(self._meshes[k].distances(ins).max()))
         return deepest
 
 
@@ -167,8 +208,10 @@ def penetration(vertices: np.ndarray, faces: np.ndarray, room, cloud: np.ndarray
 
 
 def surface_distance(points: np.ndarray, mesh) -> float:
-    """Smallest distance (m) from points (N, 3) to a triangle mesh (open3d BVH)."""
-    o3d = open3d("the egohmr room checks (ray casts and distances)")
+    """Smallest distance (m) from points (N, 3) to a triangle mesh (open3d BVH; MeshQuery without open3d)."""
+    o3d = deps.open3d_or_none()
+    if o3d is None:
+        return float(_query(mesh.vertices, mesh.faces).distances(_tensor(points)).min())
     q = o3d.core.Tensor(np.asarray(points, dtype=np.float32))
     return float(raycasting_scene(mesh.vertices, mesh.faces).compute_distance(q).numpy().min())
 
