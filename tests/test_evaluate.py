@@ -304,11 +304,12 @@ def test_shipped_checkpoint_accuracy(tmp_path):
 
 @pytest.mark.needs_checkpoint
 def test_shipped_coap_checkpoint_accuracy(tmp_path):
-    # the COAP baseline trained with the same budget as the shipped VolumetricSMPL checkpoint (docs/eval_coap_anny.json)
+    # the COAP baseline trained to the shipped VolumetricSMPL checkpoint's compute (docs/eval_coap_anny.json): 0.824 on
+    # these 4 bodies; the bar fails the COAP shipped before its catch-up (0.654 there)
     from volsmpl.models import model_kind
 
     res = ev.evaluate_checkpoint(model_kind("coap").default_checkpoint, n_bodies=4, n_points=8000, cache_dir=str(tmp_path))
-    assert res.metrics["iou_mean"] > 0.55, res.metrics
+    assert res.metrics["iou_mean"] > 0.80, res.metrics
     assert res.metrics["mse_sdf"] is None
 
 
