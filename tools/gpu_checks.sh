@@ -3,6 +3,7 @@
 #     tools/gpu_checks.sh checks             # cuda-marked tests and selfpen on CUDA
 #     tools/gpu_checks.sh bench              # `volsmpl bench --device cuda` (B = 1, 8; 60k points)
 #     tools/gpu_checks.sh apps               # hoi and motion CLIs on CUDA (small sets: costs and that they run)
+#     tools/gpu_checks.sh egohmr             # egohmr on CUDA: the test frames made there (no open3d), 16 sampled
 #     tools/gpu_checks.sh train SRC SECONDS  # resume the training run folder SRC on CUDA for about SECONDS, or start
 #                                            # the phase of config SRC (.json) from $INIT (default: the shipped asset)
 # e.g. SOURCE_COMMIT=<commit> bash tools/gpu_checks.sh train checkpoints/coap_pp 540 (one call; the run's latest
@@ -57,6 +58,10 @@ apps)  # the interaction database is built on the CPU side of that machine first
     step motion_cuda_b8 200 $V motion --device cuda --model volsmpl,coap,mesh --w coap=0.1 --scenes 1 --sequences 8 \
         --batch 8 --render 0 --out "$W/motion_b8"
     tar czf "$OUT/apps.tgz" -C "$W" . ;;
+egohmr)  # frames and room clouds are made on that machine's CPU (torch geometry where open3d is missing)
+    step egohmr_cuda 540 $V egohmr sample --device cuda --split test --frames 16 --render 1 --out "$W/egohmr"
+    cp "$W/egohmr_cuda.log" "$OUT"/
+    tar czf "$OUT/egohmr.tgz" -C "$W" egohmr ;;
 train)
     src=${2:?usage: tools/gpu_checks.sh train SRC SECONDS}; secs=${3:?seconds}
     mkdir -p /tmp/runs
@@ -85,5 +90,5 @@ train)
         split -b 15M -d "$OUT/run.tar" "$OUT/run.tar." && rm "$OUT/run.tar"
     fi ;;
 *)
-    echo "usage: tools/gpu_checks.sh checks|bench|apps|train SRC SECONDS" >&2; exit 2 ;;
+    echo "usage: tools/gpu_checks.sh checks|bench|apps|egohmr|train SRC SECONDS" >&2; exit 2 ;;
 esac
