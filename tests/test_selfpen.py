@@ -304,7 +304,7 @@ def test_presets():
     p = SelfPenConfig.preset("paper")
     assert (p.lr, p.w_selfpen, p.w_prior, p.stop_checks, p.tau, p.patience) == (1e-5, 0.1, 1e3, 1, 1.0, 0)
     t = SelfPenConfig()
-    assert (t.lr, t.w_selfpen, t.w_prior, t.stop_checks, t.tau, t.patience, t.code_grad, t.stall_rtol, t.max_step) == (1e-2, 10.0, 1.0, 3, 0.01, 10, False, 0.1, 0.1)
+    assert (t.lr, t.w_selfpen, t.w_prior, t.stop_checks, t.tau, t.patience, t.code_grad, t.stall_rtol, t.max_step) == (1e-2, 3.0, 1.0, 3, 0.01, 10, False, 0.1, 0.1)
     assert p.code_grad
     assert t.lr * t.w_prior == pytest.approx(p.lr * p.w_prior)  # the tuning kept the paper's prior step
     assert SelfPenConfig.preset("paper", lr=1e-3).lr == 1e-3
