@@ -302,12 +302,20 @@ class Volume(EncodingCache, BodyVolume):
             res = res.scatter_reduce(0, b * N + n, vals, "amin", include_self=False)
         return res.view(B, N)
 
-    def _lean_chunks(self, B: int, N: int) -> list:
-        """Chunks (b0, b1, s, e) of the lean query: whole bodies while a chunk's (body, part, point) entries stay
-        within chunk_elems (each body's work then runs as at B = 1, in cache), else point ranges of one body."""
+    #: on the CPU a lean chunk holds at most this many (body, part, point) entries (its arrays then stay in cache):
+    #: at 60k points, 2 bodies per chunk cost 1.5x per body what 1 body per chunk costs (B = 8, 1 thread, 2026-11-25)
+    CPU_CHUNK_ELEMS = 1 << 20
+
+    def _lean_chunks(self, B: int, N: int, device=None) -> list:
+        """Chunks (b0, b1, s, e) of the lean query on `device`: whole bodies while a chunk's (body, part, point)
+        entries stay within chunk_elems (on the CPU also within CPU_CHUNK_ELEMS, so that each body's work runs as
+        at B = 1, in cache), else point ranges of one body."""
         per_body = self.num_parts * max(1, N)
-        if per_body <= self.chunk_elems:
-            nb = max(1, self.chunk_elems // per_body)
+        budget = self.chunk_elems
+        if device is not None and torch.device(device).type == "cpu":
+            budget = min(budget, self.CPU_CHUNK_ELEMS)
+        if per_body <= budget:
+            nb = max(1, budget // per_body)
             return [(b, min(B, b + nb), 0, N) for b in range(0, B, nb)]
         return [(b, b + 1, s, e) for b in range(B) for s, e in self._chunks(1, N)]
 
@@ -352,8 +360,9 @@ class Volume(EncodingCache, BodyVolume):
         dense = self.dense if dense is None else dense
         B, N = points.shape[:2]
         if self.is_sdf and not dense and self.engine == "lean":
-            res = [self._query_lean(enc, points[b0:b1, s:e], b0, outside) for b0, b1, s, e in self._lean_chunks(B, N)]
-            return res[0] if len(res) == 1 else _assemble(res, self._lean_chunks(B, N), B, N)
+            chunks = self._lean_chunks(B, N, points.device)
+            res = [self._query_lean(enc, points[b0:b1, s:e], b0, outside) for b0, b1, s, e in chunks]
+            return res[0] if len(res) == 1 else _assemble(res, chunks, B, N)
         res = []
         for s, e in self._chunks(B, N):
             part, inside = self._part_values(enc, points[:, s:e], dense)

@@ -336,6 +336,24 @@ def test_chunking_bounded(vbody):
         vol.chunk_elems = old
 
 
+def test_lean_chunks_one_body_per_chunk_on_the_cpu(vbody):
+    """At the benchmark's 60k points a lean chunk on the CPU holds one body (its arrays stay in cache: per-body time at
+    B = 8 as at B = 1), on other devices as many whole bodies as chunk_elems allows; small queries still batch
+    bodies; every (body, point) is covered exactly once."""
+    vol = vbody.volume
+    K = vol.num_parts
+    cpu, gpu = vol._lean_chunks(8, 60000, "cpu"), vol._lean_chunks(8, 60000, "cuda")
+    assert cpu == [(b, b + 1, 0, 60000) for b in range(8)]
+    assert [c[1] - c[0] for c in gpu] == [vol.chunk_elems // (60000 * K)] * len(gpu) and len(gpu) < 8
+    small = vol._lean_chunks(64, 1000, "cpu")
+    assert len(small) < 64 and sum(b1 - b0 for b0, b1, _, _ in small) == 64
+    big = vol._lean_chunks(2, 200000, "cpu")
+    assert sorted({(b0, b1) for b0, b1, _, _ in big}) == [(0, 1), (1, 2)]
+    for b in (0, 1):
+        ranges = sorted((s, e) for b0, _, s, e in big if b0 == b)
+        assert ranges[0][0] == 0 and ranges[-1][1] == 200000 and all(x[1] == y[0] for x, y in zip(ranges, ranges[1:]))
+
+
 def test_attach_without_checkpoint_explains(monkeypatch, tmp_path):
     import dataclasses
 
