@@ -14,6 +14,9 @@ generalised winding number, inside above 1/2).
 """
 from __future__ import annotations
 
+import hashlib
+
+import numpy as np
 import torch
 
 from .deps import open3d_or_none
@@ -57,9 +60,12 @@ def nearest_faces(vertices: torch.Tensor, faces: torch.Tensor, points: torch.Ten
 @torch.no_grad()
 def winding_numbers(vertices: torch.Tensor, faces: torch.Tensor, points: torch.Tensor, closed: bool | None = None,
                     backend: str = "auto", chunk: int = DEFAULT_CHUNK) -> torch.Tensor:
-    """Winding numbers of points w.r.t. a mesh: integers for a closed mesh (signed crossings along 3 rays by open3d,
-    or along one ray by `MeshQuery` in torch on the vertices' device), the exact generalised winding number
-    (float64 solid angles, brute force on the CPU) for an open one.
+    """Winding numbers of points w.r.t. a mesh: integers for a closed mesh (signed crossings along 3 rays by open3d
+    for a mesh of one connected surface, such as a posed body; else, and without open3d, along one ray by
+    `MeshQuery` in float64 in torch on the vertices' device), the exact generalised winding number (float64 solid
+    angles, brute force on the CPU) for an open one. open3d's float32 rays miscount where separate components
+    touch or share planes (generated sofas and beds: 1-3 % of the points of their boxes, against libigl), so a mesh
+    of several components never takes them.
 
     Shape: vertices (V, 3), faces (F, 3), points (N, 3) -> (N,) float on the points' device.
     closed: whether the mesh is closed (checked from the faces when None). backend: as `nearest_faces`.
@@ -67,13 +73,36 @@ def winding_numbers(vertices: torch.Tensor, faces: torch.Tensor, points: torch.T
     o3d = _backend(backend)
     if closed is None:
         closed = closed_mesh_problems(faces.cpu().numpy()) is None
-    if closed and o3d is not None:
+    if closed and o3d is not None and surface_count(faces) == 1:
         w = ray_winding_number(vertices.detach().cpu(), faces.cpu(), points.detach().cpu(), nsamples=3)
     elif closed:
         w = MeshQuery(vertices, faces, chunk=chunk).winding_numbers(points)
     else:
         w = winding_number_reference(vertices.detach().cpu().double(), faces.cpu(), points.detach().cpu().double())
     return w.to(points.device, points.dtype)
+
+
+def surface_count(faces: torch.Tensor) -> int:
+    """Number of connected surfaces of a triangle mesh (faces joined through shared vertices), remembered per face
+    array (the body's faces are asked at every query of the 'mesh' kind). Shape: faces (F, 3)."""
+    f = faces.detach().cpu().numpy().astype(np.int64, copy=False)
+    if f.size == 0:
+        return 0
+    key = hashlib.sha1(f.tobytes()).hexdigest()
+    if key not in _SURFACES:
+        from scipy.sparse import coo_matrix
+        from scipy.sparse.csgraph import connected_components
+
+        V = int(f.max()) + 1
+        edges = coo_matrix((np.ones(3 * len(f)), (f.ravel(), np.roll(f, -1, axis=1).ravel())), shape=(V, V))
+        _, labels = connected_components(edges, directed=False)
+        if len(_SURFACES) > 64:
+            _SURFACES.clear()
+        _SURFACES[key] = len(np.unique(labels[np.unique(f)]))
+    return _SURFACES[key]
+
+
+_SURFACES: dict = {}
 
 
 def mesh_signed_distance(vertices: torch.Tensor, faces: torch.Tensor, points: torch.Tensor, closed: bool | None = None,

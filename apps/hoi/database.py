@@ -42,7 +42,9 @@ from .case import HoiCase, Similarity, case_to_dict, load_case, save_case
 from .interactions import RECIPES, Recipe
 from .rig import Rig
 
-DB_VERSION = 1
+# 2 (2026-11-25): the body-inside-object check counts winding numbers exactly (MeshQuery, float64) on the objects'
+# touching components, where open3d's float32 rays miscounted (volsmpl.mesh_distance.winding_numbers)
+DB_VERSION = 2
 KIND_NAMES = tuple(RECIPES)
 IMAGE_SIZE = (480, 640)  # (H, W)
 FOV_RANGE = (50.0, 65.0)  # horizontal, degrees
@@ -92,7 +94,8 @@ def _object_depth_in_body(vb: torch.Tensor, fb: torch.Tensor, vo: np.ndarray) ->
 
 
 def _body_inside_object(vo: np.ndarray, fo: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    """Winding numbers of body points w.r.t. the (closed, multi-component) object mesh > 1/2."""
+    """Winding numbers of body points w.r.t. the (closed, multi-component) object mesh > 1/2 (exact: several
+    components take MeshQuery, volsmpl.mesh_distance.winding_numbers)."""
     from volsmpl.mesh_distance import winding_numbers
     w = winding_numbers(torch.as_tensor(vo), torch.as_tensor(fo), torch.as_tensor(pts, dtype=torch.float64), closed=True)
     return w.numpy() > 0.5
