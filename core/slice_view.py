@@ -8,7 +8,7 @@ import torch
 import trimesh
 
 from .render import grid, render_mesh
-from .volume import select_body
+from .body_view import select_body
 
 
 def sdf_slice(volume, out, faces: np.ndarray, axis: int = 2, size: int = 384, margin: float = 0.1) -> np.ndarray:

@@ -21,6 +21,7 @@ from __future__ import annotations
 import torch
 from torch.profiler import record_function
 
+from .body_view import select_body
 from .boxes import inside_boxes, near_boxes
 from .collision import reduce_penetration
 from .encoding import Encoding, EncodingCache
@@ -489,16 +490,3 @@ def _assemble(parts: list, chunks: list, B: int, N: int) -> torch.Tensor:
         rows.append(torch.cat(parts[i:j], dim=1))
         i = j
     return torch.cat(rows, dim=0)
-
-
-class _OneBody:
-    """Body b of a batched output, with the fields a Volume reads."""
-
-    def __init__(self, out, b: int):
-        for name in ("vertices", "joints", "full_pose"):
-            setattr(self, name, getattr(out, name)[b:b + 1])
-
-
-def select_body(out, b: int):
-    """A one-body view (batch of 1) of body b of a batched body output, for any volume query."""
-    return _OneBody(out, b)
