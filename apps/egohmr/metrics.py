@@ -7,8 +7,8 @@
   inside the predicted body mesh, by the exact winding-number test (the same test for every guide, so rows compare);
 - `contact`: whether a body vertex lies within 2 cm of the scene mesh (exact distance: open3d's BVH, or
   `volsmpl.mesh_query.MeshQuery` on the faces near the body where open3d does not import) or inside one of its
-  closed components (exact integer winding number >= 1 by MeshQuery, float64 signed crossings; float32 ray casts
-  call some open-air points inside where components touch).
+  closed components (integer winding number >= 1 by `volsmpl.mesh_distance.winding_numbers`: exact float64 signed
+  crossings for a scene of several components; float32 ray casts call some open-air points inside where they touch).
 
     e = mpjpe(pred_joints, gt_joints)                  # (B, 24) mm
     r = collision_ratio(vertices, faces, points)       # (B,) in [0, 1]
@@ -73,13 +73,13 @@ def _near_exact(vertices: np.ndarray, mesh, threshold: float) -> bool:
 
 
 def _inside_exact(vertices: np.ndarray, mesh) -> bool:
-    """Whether a vertex (V, 3) lies inside a closed component of the mesh: exact integer winding number >= 1 by
-    MeshQuery (signed crossings in float64). Ray casts in float32 miscount where components touch: open3d's parity
-    occupancy called 27 of 16,553 open-air points of room 3 inside, the median of 3 rays' signed crossings 2."""
-    v = np.asarray(mesh.vertices, np.float64)
-    f = np.asarray(mesh.faces, np.int64)
-    return bool((MeshQuery(torch.as_tensor(v), torch.as_tensor(f), cluster_size=8)
-                 .winding_numbers(torch.as_tensor(vertices)) >= 1).any())
+    """Whether a vertex (V, 3) lies inside a closed component of the mesh: integer winding number >= 1 by
+    `winding_numbers`, which counts a scene of several components exactly (MeshQuery, float64): float32 ray casts
+    miscount where components touch (open3d's parity occupancy called 27 of 16,553 open-air points of room 3
+    inside, the median of 3 rays' signed crossings 2)."""
+    w = winding_numbers(torch.as_tensor(np.asarray(mesh.vertices, np.float64)),
+                        torch.as_tensor(np.asarray(mesh.faces, np.int64)), torch.as_tensor(vertices), closed=True)
+    return bool((w >= 1).any())
 
 
 def contact(vertices: np.ndarray, scenes: list, threshold: float = 0.02) -> np.ndarray:
