@@ -39,6 +39,7 @@ from .groundtruth import SIGN_MODES
 from .groundtruth_cache import default_cache_dir, ground_truth
 from .meter import Meter, peak_memory, run_isolated, timed_ms
 from .metrics import compute_metrics
+from .models import model_kind
 from .precision import PRECISIONS
 from .provenance import machine_info
 from .validation import VAL_SEED, digest, pose_bodies, query_points, validation_bodies, validation_labels
@@ -269,7 +270,8 @@ def evaluate_checkpoint(path: str | os.PathLike | None, config: Optional[EvalCon
         name = "ours" if path is None else Path(os.fspath(path)).name
     spec["body_model"] = getattr(body, "model_path", None)
     res = evaluate_volume(vol, body, config=config, name=name, resource_spec=spec, bodies=bodies, **overrides)
-    res.extra["checkpoint"] = spec.get("checkpoint")
+    shipped = f"shipped {model_kind('volsmpl').checkpoint}" if random_init is None else None
+    res.extra["checkpoint"] = spec.get("checkpoint") or shipped
     return res
 
 

@@ -322,11 +322,14 @@ def build_report(out_path: Path, root: Path = ROOT, overrides: dict | None = Non
 
 def _checkpoint_note(sec: Section, prov: dict, path: Path, git: Git) -> str:
     """A note naming the shipped checkpoints that changed after the result (which then describes an earlier one):
-    those the result names (by file stem), all of them where it says 'shipped' or records none."""
+    those the result names (by file stem), all of them where it names none of them and says 'shipped' or records
+    no checkpoint."""
     if not git.available or not sec.checkpoints:
         return ""
     ck = prov["checkpoint"]
-    named = [c for c in sec.checkpoints if Path(c).stem in ck or "shipped" in ck or ck == "not recorded"]
+    named = [c for c in sec.checkpoints if Path(c).stem in ck]
+    if not named and ("shipped" in ck or ck == "not recorded"):
+        named = list(sec.checkpoints)
     commit = prov["commit"] if prov["commit"] != "not recorded" else None
     if not (commit and git.commit_time(commit) is not None):
         rel = _rel_to(path, git.root)

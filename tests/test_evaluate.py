@@ -300,6 +300,7 @@ def test_shipped_checkpoint_accuracy(tmp_path):
     res = ev.evaluate_checkpoint(None, n_bodies=4, n_points=8000, cache_dir=str(tmp_path))
     assert res.metrics["iou_mean"] > 0.895, res.metrics
     assert res.metrics["mse_sdf_surf"] < 3e-5, res.metrics
+    assert res.extra["checkpoint"] == "shipped volsmpl_anny"   # what `volsmpl report` matches against the assets
 
 
 @pytest.mark.needs_checkpoint

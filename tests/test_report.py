@@ -171,3 +171,28 @@ def test_a_result_of_another_layout_does_not_stop_the_report(tmp_path):
     res = write(tmp_path / "e.json", {"metrics": [1, 2], "config": "x"})
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"eval_volsmpl": res}, git=NoGit())
     assert "Could not tabulate these results (AttributeError" in text and "| `eval_volsmpl` |" in text
+
+
+def test_checkpoint_note_names_only_the_checkpoint_a_result_describes(repo):
+    """An eval of the shipped VolumetricSMPL is not said to describe an earlier COAP when only COAP changed later
+    (and an eval that records no checkpoint is, as before, checked against both)."""
+    root, first, second = repo
+    for stem in ("volsmpl_anny", "coap_anny"):
+        write(root / "core" / "assets" / f"{stem}.safetensors", "v1")
+    _git(root, "add", ".")
+    _git(root, "commit", "-q", "-m", "ship both", date="2026-01-03T00:00:00+00:00")
+    made = _git(root, "rev-parse", "--short", "HEAD")
+    write(root / "core" / "assets" / "coap_anny.safetensors", "v2")
+    _git(root, "commit", "-q", "-am", "ship a new coap", date="2026-01-04T00:00:00+00:00")
+    metrics = {"metrics": {"iou_mean": 0.9, "iou_surf": 0.85, "iou_unif": 0.95}, "meta": {"git_commit": made}}
+
+    def row(extra: dict) -> str:
+        res = write(root / "x" / "eval.json", {**metrics, "extra": extra})
+        text, _ = report.build_report(root / "r.md", root=root, overrides={"eval_volsmpl": res})
+        return next(ln for ln in text.splitlines() if ln.startswith("| `eval_volsmpl` |"))
+
+    assert "changed after it" not in row({"checkpoint": "shipped volsmpl_anny"})
+    line = row({"checkpoint": None})
+    assert "coap_anny.safetensors" in line and "describes an earlier checkpoint" in line
+    line = row({"checkpoint": "runs/x/coap_anny"})
+    assert "coap_anny.safetensors" in line and "volsmpl_anny.safetensors" not in line
