@@ -150,6 +150,29 @@ def test_resume_reuses_fits_of_the_same_code_and_settings_only(body, tmp_path, c
     assert "--batch must be >= 1" in capsys.readouterr().err
 
 
+def test_resume_refits_when_the_object_mesh_file_changes(body, tmp_path, capsys):
+    """A user's case names its mesh by path: --resume reuses a fit only while the file's content is the same (an
+    edited or replaced mesh under the same name was served from OUT/cases/: the old object's fit)."""
+    import trimesh
+
+    d = {**ball_case(body), "object": {"category": "ball", "mesh": "ball.ply", "units": "mm"},
+         "contacts": [["right_hand", "any"]]}
+    (tmp_path / "case.json").write_text(json.dumps(d))
+    args = ["hoi", "fit", "--case", str(tmp_path / "case.json"), "--model", "mesh", "--iters", "2", "--render", "0"]
+    after = lambda run: json.loads((tmp_path / run / "results.json").read_text())["cases"]["mesh"][0]["after"]  # noqa: E731
+    trimesh.creation.icosphere(radius=110.0).export(tmp_path / "ball.ply")
+    assert cli_main(args + ["--out", str(tmp_path / "a")]) == 0
+    old = after("a")
+    trimesh.creation.icosphere(radius=30.0).export(tmp_path / "ball.ply")  # another object, the same file name
+    assert cli_main(args + ["--out", str(tmp_path / "fresh")]) == 0  # the reference: the new mesh fitted anew
+    capsys.readouterr()
+    assert cli_main(args + ["--out", str(tmp_path / "a"), "--resume"]) == 0
+    assert "(reused)" not in capsys.readouterr().out
+    assert after("a") == after("fresh") != old
+    assert cli_main(args + ["--out", str(tmp_path / "a"), "--resume"]) == 0  # unchanged file: reused
+    assert "(reused)" in capsys.readouterr().out and after("a") == after("fresh")
+
+
 def _state(problem, sim):
     from volsmpl.optim.harness import State
     st = State({k: v.value.clone() for k, v in problem.variables(sim).items()})

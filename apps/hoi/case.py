@@ -206,6 +206,28 @@ def object_template(case: HoiCase):
     return make_object(case.category, seed=case.template_seed) if case.mesh_path is None else None
 
 
+def mesh_file(case: HoiCase) -> Path | None:
+    """The path of the case's object mesh file (relative paths from the JSON's folder); None for a template.
+    FileNotFoundError when it is missing."""
+    if case.mesh_path is None:
+        return None
+    p = Path(case.mesh_path)
+    if not p.is_absolute() and case.source is not None:
+        p = case.source / p
+    if not p.is_file():
+        raise FileNotFoundError(f"case {case.name!r}: object mesh {p} not found")
+    return p
+
+
+def mesh_digest(case: HoiCase) -> str | None:
+    """sha256 of the object mesh file's bytes (None for a template): part of a fit's key, so an edited or
+    replaced file is fitted anew rather than served from OUT/cases/."""
+    import hashlib
+
+    p = mesh_file(case)
+    return None if p is None else hashlib.sha256(p.read_bytes()).hexdigest()
+
+
 def object_mesh(case: HoiCase, template=None):
     """The object's mesh in its own frame (metres) and its regions {name: face ids} (empty for a mesh file).
 
@@ -216,11 +238,7 @@ def object_mesh(case: HoiCase, template=None):
     if case.mesh_path is None:
         tmpl = template if template is not None else object_template(case)
         return tmpl.mesh, dict(tmpl.regions)
-    p = Path(case.mesh_path)
-    if not p.is_absolute() and case.source is not None:
-        p = case.source / p
-    if not p.is_file():
-        raise FileNotFoundError(f"case {case.name!r}: object mesh {p} not found")
+    p = mesh_file(case)
     try:
         mesh = trimesh.load(p, force="mesh", process=False)
     except Exception as e:  # trimesh raises many kinds for unreadable files

@@ -114,7 +114,7 @@ def run(args) -> int:
     from volsmpl.case_store import CaseStore, job_key
 
     from . import database
-    from .case import case_to_dict, load_case
+    from .case import case_to_dict, load_case, mesh_digest
     from .figures import case_panel, summary_plot
     from .fit import FitConfig, Problem, fit_cases
 
@@ -157,10 +157,12 @@ def run(args) -> int:
     for i0 in range(0, len(cases), args.batch):
         group = cases[i0:i0 + args.batch]
         results = {c.name: {} for c in group}
+        digests = {c.name: mesh_digest(c) for c in group}  # a user's mesh file: its content, not only its name
         problem = None  # the group's Problem, built once: it reads only what every kind shares (prepare sets the kind)
         for m in models:
             # the batch size is part of a fit's key: its time per case depends on it
             keys = {c.name: job_key({"config": asdict(cfg), "model": m, "case": case_to_dict(c),
+                                     **({"mesh_sha256": digests[c.name]} if digests[c.name] else {}),
                                      **({"batch": args.batch} if args.batch > 1 else {})},
                                     modules=[volumes[m]], packages=["volsmpl.apps.hoi"]) for c in group}
             recs = {c.name: store.get(f"{c.name}_{m}", keys[c.name]) for c in group}
