@@ -156,6 +156,37 @@ def test_user_scene_and_bad_inputs(tmp_path):
         O.SceneCollision(volsmpl.attach_volume(volsmpl.create_body(), model="mesh"), np.zeros((0, 3)))
 
 
+def test_scene_files_with_several_arrays_or_geometries_are_read_exactly_or_refused(tmp_path):
+    """The scene reader (volsmpl.scene.scan.read_scan, behind --scene) never guesses: an .npz without a 'points'
+    array took its first array (here the colours, 0..255 'metres'); a glb holding a mesh and a point cloud lost the
+    cloud; a glb of point clouds only was called empty. Node transforms apply."""
+    import trimesh
+    from volsmpl.scene.scan import read_scan
+    rng = np.random.default_rng(0)
+    xyz, rgb = rng.random((50, 3)), rng.integers(0, 255, (50, 3)).astype(float)
+    np.savez(tmp_path / "two.npz", colors=rgb, xyz=xyz)
+    with pytest.raises(ValueError, match="none is named 'points'"):
+        read_scan(tmp_path / "two.npz")
+    np.savez(tmp_path / "named.npz", colors=rgb, points=xyz)
+    assert np.array_equal(read_scan(tmp_path / "named.npz", units="cm"), xyz * 0.01)
+    np.savez(tmp_path / "one.npz", xyz)
+    assert np.array_equal(read_scan(tmp_path / "one.npz"), xyz)
+    a, b = rng.random((30, 3)), rng.random((20, 3))
+    T = np.eye(4)
+    T[:3, 3] = [5.0, 0.0, -2.0]
+    clouds = trimesh.Scene()
+    clouds.add_geometry(trimesh.PointCloud(a), node_name="a")
+    clouds.add_geometry(trimesh.PointCloud(b), node_name="b", transform=T)
+    clouds.export(tmp_path / "clouds.glb")
+    got = read_scan(tmp_path / "clouds.glb")
+    want = np.concatenate([a, b + T[:3, 3]])
+    assert got.shape == want.shape
+    assert np.allclose(got[np.lexsort(got.T)], want[np.lexsort(want.T)], atol=1e-6)  # glb stores float32
+    mixed = trimesh.Scene([trimesh.creation.box(), trimesh.PointCloud(a + 5.0)])
+    mixed.export(tmp_path / "mixed.glb")
+    with pytest.raises(ValueError, match=r"1 mesh\(es\) and 1 point cloud"):
+        S.load_scene(tmp_path / "mixed.glb")
+
 @pytest.mark.parametrize("kind", ["coap", "volsmpl"])
 def test_published_collision_term_equals_the_culled_one(body, short_walk, kind):
     """COAP as published (every part at every point, synth.published_penetration, for the --published-cost

@@ -45,28 +45,44 @@ def read_scan(path, units: str = "m", n_surface: int = 65536, seed: int = 0, opt
             arr = np.load(p)
         elif suffix == ".npz":
             z = np.load(p)
-            arr = z["points"] if "points" in z else z[z.files[0]]
+            if "points" not in z.files and len(z.files) != 1:  # never guess: the first array may be the colours
+                raise ValueError(f"{option} {path}: the .npz holds arrays {', '.join(z.files)} and none is named "
+                                 f"'points'; save the (N, 3) coordinates as points=... (np.savez(path, points=xyz))")
+            arr = z["points"] if "points" in z.files else z[z.files[0]]
         else:
             arr = np.loadtxt(p, delimiter="," if suffix == ".csv" else None, ndmin=2)[:, :3]
         pts = check_cloud(arr)
     else:
-        import trimesh
-        try:
-            geom = trimesh.load(p, force=None)
-        except Exception as e:  # noqa: BLE001 - any reader error is the file's problem
-            raise ValueError(f"{option} {path}: cannot read it ({type(e).__name__}: {e})") from None
-        if isinstance(geom, trimesh.Scene):
-            geom = geom.to_geometry() if hasattr(geom, "to_geometry") else geom.dump(concatenate=True)
-        if isinstance(geom, trimesh.Trimesh) and len(geom.faces):
-            if not np.isfinite(geom.vertices).all():
-                raise ValueError(f"{option} {path}: the mesh has NaN or Inf vertices")
-            pts = sample_surface(geom, n_surface, seed=seed)[0]
-        elif hasattr(geom, "vertices"):
-            pts = np.asarray(geom.vertices)
-        else:
-            raise ValueError(f"{option} {path}: not a mesh or a point cloud ({type(geom).__name__})")
-        pts = check_cloud(pts)
+        pts = check_cloud(_geometry_points(p, path, n_surface, seed, option))
     return pts * UNITS[units]
+
+
+def _geometry_points(p: Path, path, n_surface: int, seed: int, option: str) -> np.ndarray:
+    """The points of a file trimesh reads: a mesh's surface samples, a point cloud's points. A scene (glb, a
+    multi-object obj) is flattened with its node transforms; one that mixes meshes and point clouds is refused
+    (sampled surfaces and raw points differ in density; trimesh's own flattening drops the clouds)."""
+    import trimesh
+    try:
+        geom = trimesh.load(p, force=None)
+    except Exception as e:  # noqa: BLE001 - any reader error is the file's problem
+        raise ValueError(f"{option} {path}: cannot read it ({type(e).__name__}: {e})") from None
+    parts = geom.dump() if isinstance(geom, trimesh.Scene) else [geom]
+    meshes = [g for g in parts if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+    clouds = [g for g in parts if isinstance(g, (trimesh.PointCloud, trimesh.Trimesh)) and not any(g is m for m in meshes)
+              and len(g.vertices)]   # a mesh file without faces (an obj of 'v' lines) is a cloud
+    if meshes and clouds:
+        raise ValueError(f"{option} {path}: the file holds {len(meshes)} mesh(es) and {len(clouds)} point cloud(s); "
+                         f"export the meshes or the point clouds alone")
+    if meshes:
+        mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
+        if not np.isfinite(mesh.vertices).all():
+            raise ValueError(f"{option} {path}: the mesh has NaN or Inf vertices")
+        return sample_surface(mesh, n_surface, seed=seed)[0]
+    if clouds:
+        return np.concatenate([np.asarray(c.vertices) for c in clouds])
+    if isinstance(geom, trimesh.Scene) or hasattr(geom, "vertices"):
+        return np.zeros((0, 3))   # check_cloud: empty
+    raise ValueError(f"{option} {path}: not a mesh or a point cloud ({type(geom).__name__})")
 
 
 def to_y_up(points: np.ndarray, up: str) -> np.ndarray:
