@@ -210,9 +210,14 @@ def test_published_collision_term_equals_the_culled_one(body, short_walk, kind):
 
 def test_cli_errors_are_one_line(tmp_path, capsys):
     from volsmpl.cli import main
+    import trimesh
     path = _user_scene(tmp_path)
     out = str(tmp_path / "o")
+    (tmp_path / "header.csv").write_text("x,y,z\n0,0,0\n1,0,1\n")
+    trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]], process=False).export(tmp_path / "flat.ply")
     cases = [(["--frames", "1"], "frames must be"),
+             (["--scene", str(tmp_path / "header.csv")], "header.csv: cannot read it as rows of numbers x y z"),
+             (["--scene", str(tmp_path / "flat.ply")], "flat.ply: every triangle of the mesh has zero area"),
              (["--scene", str(path), "--up", "z", "--units", "cm", "--start", "0,0", "--goal", "150,0"], "inside an obstacle"),
              (["--scene", str(path), "--up", "z", "--units", "cm", "--start=-150,0", "--goal=900,0"], "off the floor"),
              (["--w", "mesh=x"], "weights must be numbers"),

@@ -50,7 +50,11 @@ def read_scan(path, units: str = "m", n_surface: int = 65536, seed: int = 0, opt
                                  f"'points'; save the (N, 3) coordinates as points=... (np.savez(path, points=xyz))")
             arr = z["points"] if "points" in z.files else z[z.files[0]]
         else:
-            arr = np.loadtxt(p, delimiter="," if suffix == ".csv" else None, ndmin=2)[:, :3]
+            try:
+                arr = np.loadtxt(p, delimiter="," if suffix == ".csv" else None, ndmin=2)[:, :3]
+            except ValueError as e:
+                raise ValueError(f"{option} {path}: cannot read it as rows of numbers x y z ({e}); remove the header "
+                                 f"line or start it with '#'") from None
         pts = check_cloud(arr)
     else:
         pts = check_cloud(_geometry_points(p, path, n_surface, seed, option))
@@ -77,6 +81,8 @@ def _geometry_points(p: Path, path, n_surface: int, seed: int, option: str) -> n
         mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
         if not np.isfinite(mesh.vertices).all():
             raise ValueError(f"{option} {path}: the mesh has NaN or Inf vertices")
+        if not mesh.area > 0:
+            raise ValueError(f"{option} {path}: every triangle of the mesh has zero area; export the scene's surfaces")
         return sample_surface(mesh, n_surface, seed=seed)[0]
     if clouds:
         return np.concatenate([np.asarray(c.vertices) for c in clouds])
