@@ -156,6 +156,28 @@ def test_user_scene_and_bad_inputs(tmp_path):
         O.SceneCollision(volsmpl.attach_volume(volsmpl.create_body(), model="mesh"), np.zeros((0, 3)))
 
 
+def test_a_scene_in_the_wrong_units_is_refused_by_its_walk(tmp_path):
+    """A 4 x 4 m room scanned in millimetres and read as centimetres is a 40 m room with a 10 m box; --start/--goal
+    are read in the same units, so every check passed and the walk ran (goal 24.4 m off, no collision: the box
+    was out of reach). The pair is now refused: 30 m apart, 80 frames cover at most 2.2 m/s * 79 / 30 s."""
+    import trimesh
+    floor = trimesh.Trimesh([[-2000, -2000, 0], [2000, -2000, 0], [2000, 2000, 0], [-2000, 2000, 0]], [[0, 1, 2], [0, 2, 3]])
+    box = trimesh.creation.box(bounds=[[-500, -500, 0], [500, 500, 1000]])
+    trimesh.util.concatenate([floor, box]).export(tmp_path / "room_mm.ply")
+    for units, (s, g) in (("mm", ([-1.5, 0.0], [1.5, 0.0])), ("cm", ([-15.0, 0.0], [15.0, 0.0]))):
+        sc = S.load_scene(tmp_path / "room_mm.ply", up="z", units=units)
+        ss, gg = S.floor_xz((-1500, 0), "z", units), S.floor_xz((1500, 0), "z", units)
+        assert np.allclose(S.check_endpoint(sc, ss, "--start"), s) and np.allclose(S.check_endpoint(sc, gg, "--goal"), g)
+        if units == "mm":
+            S.check_pair(sc, ss, gg, 80, units)
+            continue
+        with pytest.raises(ValueError, match=r"30\.00 m apart .*--units cm.* 40\.0 x 40\.0 m and 10\.0 m tall\); 80 "
+                                             r"frames walk at most 5\.79 m: check --units, or give --frames 411 or more"):
+            S.check_pair(sc, ss, gg, 80, units)
+    sc = S.load_scene(tmp_path / "room_mm.ply", up="z", units="mm")
+    with pytest.raises(ValueError, match=r"0\.015 m apart .*nothing to walk; check --units"):
+        S.check_pair(sc, S.floor_xz((-1.5, 0), "z", "cm"), S.floor_xz((0, 0), "z", "cm"), 80, "mm")
+
 def test_scene_files_with_several_arrays_or_geometries_are_read_exactly_or_refused(tmp_path):
     """The scene reader (volsmpl.scene.scan.read_scan, behind --scene) never guesses: an .npz without a 'points'
     array took its first array (here the colours, 0..255 'metres'); a glb holding a mesh and a point cloud lost the
@@ -219,7 +241,9 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
              (["--scene", str(tmp_path / "header.csv")], "header.csv: cannot read it as rows of numbers x y z"),
              (["--scene", str(tmp_path / "flat.ply")], "flat.ply: every triangle of the mesh has zero area"),
              (["--scene", str(path), "--up", "z", "--units", "cm", "--start", "0,0", "--goal", "150,0"], "inside an obstacle"),
-             (["--scene", str(path), "--up", "z", "--units", "cm", "--start=-150,0", "--goal=900,0"], "off the floor"),
+             (["--scene", str(path), "--up", "z", "--units", "cm", "--start=-150,0", "--goal=300,0"], "off the floor"),
+             (["--scene", str(path), "--up", "z", "--units", "m", "--start=-150,0", "--goal=150,0"],
+              "--start and --goal are 300.00 m apart (in metres after --units m"),
              (["--w", "mesh=x"], "weights must be numbers"),
              (["--published-cost"], "add coap to --model"),
              (["--batch", "0"], "--batch must be >= 1"),

@@ -137,7 +137,7 @@ def run(args) -> int:
 
     from . import walk as W
     from .figures import topdown
-    from .scenes import check_endpoint, floor_xz, load_scene, room_scenes
+    from .scenes import check_endpoint, check_pair, floor_xz, load_scene, room_scenes
     from .synth import SynthConfig, check_frames, measure_cost, published_penetration, synthesize_batch
 
     out = check_writable(args.out, "dir", "--out")
@@ -172,10 +172,10 @@ def run(args) -> int:
 
     if args.scene is not None:
         sc = load_scene(args.scene, up=args.up, units=args.units, floor_y=args.floor_y)
-        s = check_endpoint(sc, floor_xz(parse_xy(args.start, "--start"), args.up, args.units), "--start")
-        g = check_endpoint(sc, floor_xz(parse_xy(args.goal, "--goal"), args.up, args.units), "--goal")
-        if np.linalg.norm(g - s) < 0.1:
-            raise ValueError("--start and --goal are less than 10 cm apart: nothing to walk")
+        s = floor_xz(parse_xy(args.start, "--start"), args.up, args.units)
+        g = floor_xz(parse_xy(args.goal, "--goal"), args.up, args.units)
+        check_pair(sc, s, g, frames, args.units)   # first: a scene in the wrong units shows here (its message says so)
+        s, g = check_endpoint(sc, s, "--start"), check_endpoint(sc, g, "--goal")
         sc.pairs = [(s, g)]
         scenes = [sc]
     else:

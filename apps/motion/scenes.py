@@ -6,7 +6,8 @@ floor at `floor_y`) with a name, and its start/goal pairs (x, z floor positions)
 point cloud in any format trimesh reads (ply, obj, off, stl, glb, xyz...) or a .npy/.npz/.txt array of points,
 converts up-axis and units, and samples it to 16,384 points.
 
-`check_endpoint` refuses a start or goal off the floor or inside an obstacle, with a clear ValueError.
+`check_endpoint` refuses a start or goal off the floor or inside an obstacle, `check_pair` a pair that the walk
+cannot cover in its frames (a scene in the wrong --units), each with a clear ValueError.
 """
 from __future__ import annotations
 
@@ -56,6 +57,28 @@ def check_endpoint(scene: MotionScene, xz, which: str) -> np.ndarray:
         raise ValueError(f"{which} ({q[0]:.2f}, {q[1]:.2f}) is inside an obstacle of scene '{scene.name}' "
                          f"({int(obst.sum())} scene points within {BODY_CLEAR} m); pick a free floor position")
     return q
+
+
+def check_pair(scene: MotionScene, s: np.ndarray, g: np.ndarray, frames: int, units: str) -> None:
+    """ValueError unless a walk of `frames` frames at the walking model's top speed (synth.SPEED_HI) can cover the
+    start-goal distance (metres) and the two are 10 cm apart or more. A scene in the wrong --units scales its
+    start/goal with it (both are read in the file's units): a mm scan read as cm becomes a 40 m room whose 30 m walk
+    no sequence reaches, so the message names the scene's size and --units."""
+    from .synth import SPEED_HI
+    from .walk import FPS
+
+    dist = float(np.linalg.norm(np.asarray(g) - np.asarray(s)))
+    size = np.ptp(scene.points, axis=0)
+    where = (f"in metres after --units {units}, the unit of --start/--goal too; the scene is {size[0]:.1f} x "
+             f"{size[2]:.1f} m and {size[1]:.1f} m tall")
+    if dist < 0.1:
+        raise ValueError(f"--start and --goal are {dist:.3f} m apart ({where}): nothing to walk; check --units or "
+                         f"pick points farther apart")
+    reach = SPEED_HI * (frames - 1) / FPS
+    if dist > reach:
+        need = int(np.ceil(dist / SPEED_HI * FPS)) + 1
+        raise ValueError(f"--start and --goal are {dist:.2f} m apart ({where}); {frames} frames walk at most "
+                         f"{reach:.2f} m: check --units, or give --frames {need} or more")
 
 
 def walk_distance(frames: int, speed: float = 1.1) -> float:
