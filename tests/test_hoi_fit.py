@@ -82,6 +82,11 @@ def test_case_round_trips_and_bad_cases_are_named(body, tmp_path):
         Problem(case_from_dict({**d, "contacts": [["right_hand", "handle"]]}), body, vol, FitConfig())
     with pytest.raises(ValueError, match="was made for body"):
         Problem(case_from_dict({**d, "body": {**d["body"], "fingerprint": "0123456789abcdef"}}), body, vol, FitConfig())
+    # a confidence of -1 for a missing joint (a common convention) made the weighted mean's weights sum to <= 0:
+    # the keypoint term of the ball case became ~1e7 instead of ignoring the joint
+    missing = [[u, v, -1.0 if j >= 12 else c] for j, (u, v, c) in enumerate(d["keypoints_2d"])]
+    with pytest.raises(ValueError, match=r"confidences \(third column\) must lie in \[0, 1\], got -1\.\.0\.9; give 0"):
+        case_from_dict({**d, "keypoints_2d": missing})
     bad = {**d, "init": {**d["init"], "object": {**d["init"]["object"], "scale": float("nan")}}}
     with pytest.raises(ValueError, match="init.object"):
         case_from_dict(bad)

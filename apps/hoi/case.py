@@ -17,7 +17,7 @@ JSON (format 'volsmpl-hoi-case', version 1):
      "object": {"category": "cup", "template_seed": 7}            # a template of volsmpl.scene.objects, or
                {"category": "cup", "mesh": "mug.obj", "units": "mm"},   # any mesh file trimesh reads (path relative to the JSON)
      "camera": {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], "image_size": [H, W]},
-     "keypoints_2d": [[u, v, confidence] x 24],                    # the body's 24 joints, SMPL order; confidence 0: unseen
+     "keypoints_2d": [[u, v, confidence] x 24],                    # the body's 24 joints, SMPL order; confidence in [0, 1], 0: unseen
      "silhouette": [[u, v], ...],                                  # pixels of the object's mask (a sample of them)
      "contacts": [["right_hand", "grasp"], ...],                   # (body part, object region); region 'any': the whole mesh
      "init": {"human": SIM, "object": SIM},                        # first-stage estimates
@@ -141,10 +141,14 @@ def case_from_dict(d: dict, source: Path | None = None) -> HoiCase:
     init = d.get("init")
     if not isinstance(init, dict):
         raise ValueError(f"{where}: 'init' (the first-stage estimates of 'human' and 'object') is missing")
+    kp = _array(d, "keypoints_2d", (24, 3), where)
+    if ((kp[:, 2] < 0) | (kp[:, 2] > 1)).any():  # a weight: -1 for 'missing' flipped the term's sign
+        raise ValueError(f"{where}: 'keypoints_2d' confidences (third column) must lie in [0, 1], got "
+                         f"{kp[:, 2].min():g}..{kp[:, 2].max():g}; give 0 for joints not detected")
     truth = d.get("truth")
     return HoiCase(
         name=str(d.get("name", "case")), category=category, body=body, fingerprint=str(b.get("fingerprint", "")),
-        K=K, image_size=size, keypoints_2d=_array(d, "keypoints_2d", (24, 3), where),
+        K=K, image_size=size, keypoints_2d=kp,
         silhouette=_array(d, "silhouette", (None, 2), where), contacts=[tuple(map(str, c)) for c in contacts],
         init={k: Similarity.from_dict(init.get(k), f"{where} init.{k}") for k in ("human", "object")},
         truth=None if truth is None else {k: Similarity.from_dict(truth.get(k), f"{where} truth.{k}")
