@@ -1,13 +1,15 @@
 """`volsmpl report`: every result table beside the paper's numbers, in one Markdown file.
 
-    volsmpl report [--out docs/report.md] [--results NAME=PATH ...] [--check]
+    volsmpl report [--out docs/report.md] [--results NAME=PATH ...] [--check] [--verify NAME=PATH ...]
 
 Reads the result JSONs that `volsmpl eval`, `volsmpl bench`, `volsmpl selfpen` and the apps write (nothing is
 run, nothing is fetched), and writes docs/report.md: per section our tables beside the paper's (volsmpl.paper),
 the figures, and where each result came from (checkpoint, device, commit, date; "not recorded" where a JSON
 lacks them). A result is flagged stale when the code that produces it changed after it was made: the commit
 recorded in the JSON (else its recorded date, else the commit that last touched the JSON file itself, else the
-file's mtime) is compared with `git log -1 -- <producer paths>`. Without git the report says so. The sections
+file's mtime) is compared with `git log -1 -- <producer paths>`; a stale result is current again when some of its
+cases, made again at or after the producer's last change, agree with it (`--verify NAME=PATH` stores that check
+beside the result: volsmpl.result_check). Without git the report says so. The sections
 missing results are listed with the command that produces each. --check exits 1 when a result is stale or
 missing.
 
@@ -27,6 +29,7 @@ from typing import Callable
 
 from volsmpl import report_sections as rs
 from volsmpl.outputs import check_writable, write_atomic
+from volsmpl.result_check import check_for, write_check
 
 _HERE = Path(__file__).resolve().parent.parent
 #: the repository root of the source checkout (core/ -> root); else (an installed package) the working directory
@@ -167,7 +170,34 @@ def _day(ts: float) -> str:
 
 
 def staleness(path: Path, prov: dict, section: Section, git: Git) -> tuple[str, str]:
-    """('current' | 'stale' | 'unknown', explanation) of one result against its producer code."""
+    """('current' | 'stale' | 'unknown', explanation) of one result against its producer code; a stale result is
+    current again when a re-run check of this very file (`volsmpl.result_check`) made at or after the producer's
+    last change agrees with it."""
+    verdict, why = _staleness(path, prov, section, git)
+    check = check_for(path) if verdict == "stale" else None
+    if check is None:
+        return verdict, why
+    at = check.get("fresh_commit")
+    if not (at and git.commit_time(at) is not None):
+        return verdict, f"{why}; its re-run check records no commit of this repository"
+    later = git.last_change(section.producer, since=at)
+    if later:
+        return verdict, f"{why}; its re-run check (at {at}) predates {later[0]}"
+    if not check.get("agree"):
+        return verdict, (f"{why}; a re-run at {at} disagrees on {check.get('n_mismatches')} values of "
+                         f"{check.get('cases_compared')} cases (e.g. {_mismatch(check)})")
+    return "current", (f"re-run check at {at} (not before the producer's last change): {check['cases_compared']} of "
+                       f"{check['cases_total']} cases made again, all {check['values_compared']} values agree "
+                       f"(rel. {check['rel_tol']:g}); {why}")
+
+
+def _mismatch(check: dict) -> str:
+    m = (check.get("mismatches") or [{}])[0]
+    return f"{m.get('case')}: {m.get('value')} {m.get('stored')} -> {m.get('fresh')}"
+
+
+def _staleness(path: Path, prov: dict, section: Section, git: Git) -> tuple[str, str]:
+    """staleness by commits and dates alone."""
     if not git.available:
         return "unknown", f"not checked: git unavailable ({git.reason})"
     code = git.last_change(section.producer)
@@ -220,17 +250,17 @@ def load_json(path: Path) -> dict:
     return data
 
 
-def parse_overrides(items, sections: dict | None = None) -> dict[str, Path]:
+def parse_overrides(items, sections: dict | None = None, flag: str = "--results") -> dict[str, Path]:
     """--results NAME=PATH ... -> {name: path}; unknown names and missing files are user errors."""
     known, out = result_names(sections), {}
     for item in items or []:
         name, sep, path = item.partition("=")
         if not sep or not name or not path:
-            raise ValueError(f"--results {item!r}: give NAME=PATH (names: {', '.join(known)})")
+            raise ValueError(f"{flag} {item!r}: give NAME=PATH (names: {', '.join(known)})")
         if name not in known:
-            raise ValueError(f"--results {name}: unknown result name (names: {', '.join(known)})")
+            raise ValueError(f"{flag} {name}: unknown result name (names: {', '.join(known)})")
         if not Path(path).is_file():
-            raise FileNotFoundError(f"--results {name}={path}: file not found")
+            raise FileNotFoundError(f"{flag} {name}={path}: file not found")
         out[name] = Path(path)
     return out
 
@@ -352,6 +382,10 @@ def add_parser(sub):
     p.add_argument("--results", nargs="+", default=[], metavar="NAME=PATH",
                    help=f"read result NAME from PATH instead of its default (names: {', '.join(result_names())})")
     p.add_argument("--check", action="store_true", help="exit 1 when a result is stale or missing (for CI)")
+    p.add_argument("--verify", nargs="+", default=[], metavar="NAME=PATH",
+                   help="compare result NAME with a fresh run of some of its cases (PATH: that run's results.json) "
+                        "and store the comparison beside the result (NAME's file .check.json; volsmpl.result_check)")
+    p.add_argument("--verify-tol", type=float, default=1e-6, help="relative tolerance of --verify (default 1e-6)")
     return p
 
 
@@ -359,6 +393,18 @@ def run(args) -> int:
     overrides = parse_overrides(args.results)
     out = Path(args.out) if args.out else ROOT / "docs" / "report.md"
     check_writable(out, "file", "--out")
+    if not (args.verify_tol >= 0):
+        raise ValueError(f"--verify-tol must be >= 0, got {args.verify_tol}")
+    for name, fresh in parse_overrides(args.verify, flag="--verify").items():
+        sec = next(sec for sec in SECTIONS.values() if name in sec.results)
+        stored = overrides.get(name) or _locate(sec.results[name], ROOT)
+        if stored is None:
+            raise ValueError(f"--verify {name}: there is no stored result to compare with; make it first "
+                             f"(`{sec.commands.get(name, '?')}`) or give it with --results {name}=PATH")
+        c = write_check(stored, fresh, rel_tol=args.verify_tol)
+        print(f"{name}: {c['cases_compared']} of {c['cases_total']} cases compared, {c['values_compared']} values, "
+              + ("all agree" if c["agree"] else f"{c['n_mismatches']} differ (largest {c['max_abs_diff']:g})")
+              + f"; wrote {stored.with_name(stored.stem + '.check.json')}")
     text, status = build_report(out, ROOT, overrides)
     write_atomic(out, text)
     print(f"wrote {out}: " + "; ".join(f"{k}: {', '.join(v) or 'none'}" for k, v in status.items()))

@@ -45,3 +45,38 @@ def random_pose(B: int, scale: float = 0.4, seed: int = 0, dtype=torch.float32, 
         body_pose=torch.randn(B, 69, generator=g, dtype=dtype) * scale,
         transl=torch.randn(B, 3, generator=g, dtype=dtype) * 0.2,
     )
+
+
+def git_run(repo, *args, date: str | None = None) -> str:
+    """Run git in `repo` with a fixed author (and commit date when given); its stdout, stripped."""
+    import os
+    import subprocess
+
+    env = dict(os.environ, GIT_AUTHOR_NAME="t", GIT_AUTHOR_EMAIL="t@t", GIT_COMMITTER_NAME="t",
+               GIT_COMMITTER_EMAIL="t@t")
+    if date:
+        env.update(GIT_AUTHOR_DATE=date, GIT_COMMITTER_DATE=date)
+    return subprocess.run(["git", "-C", str(repo), *args], env=env, check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
+def producer_repo(root, first_files: dict | None = None) -> tuple[str, str]:
+    """A git repository in `root` whose producer code apps/hoi/run.py changes once: commit 'first' (with
+    `first_files`, {relative path: text}) on 2026-01-01, 'change the producer' on 2026-01-02. Returns both short
+    hashes; skips the test where git is unavailable."""
+    import subprocess
+    from pathlib import Path
+
+    try:
+        git_run(root, "init", "-q")
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("git is not available")
+    for rel, text in {"apps/hoi/run.py": "v = 1\n", **(first_files or {})}.items():
+        (Path(root) / rel).parent.mkdir(parents=True, exist_ok=True)
+        (Path(root) / rel).write_text(text)
+    git_run(root, "add", ".")
+    git_run(root, "commit", "-q", "-m", "first", date="2026-01-01T00:00:00+00:00")
+    first = git_run(root, "rev-parse", "--short", "HEAD")
+    (Path(root) / "apps/hoi/run.py").write_text("v = 2\n")
+    git_run(root, "commit", "-q", "-am", "change the producer", date="2026-01-02T00:00:00+00:00")
+    return first, git_run(root, "rev-parse", "--short", "HEAD")

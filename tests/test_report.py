@@ -2,12 +2,11 @@
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 from pathlib import Path
 
 import pytest
 
+from conftest import git_run, producer_repo
 from volsmpl import report
 from volsmpl.cli import main
 
@@ -78,29 +77,12 @@ def test_paper_mismatch_is_noted(tmp_path):
     assert "volsmpl.step_ms: 15.0 (paper: 14)" in text
 
 
-def _git(repo: Path, *args, date: str | None = None) -> str:
-    env = dict(os.environ, GIT_AUTHOR_NAME="t", GIT_AUTHOR_EMAIL="t@t", GIT_COMMITTER_NAME="t",
-               GIT_COMMITTER_EMAIL="t@t")
-    if date:
-        env.update(GIT_AUTHOR_DATE=date, GIT_COMMITTER_DATE=date)
-    return subprocess.run(["git", "-C", str(repo), *args], env=env, check=True, capture_output=True,
-                          text=True).stdout.strip()
 
 
 @pytest.fixture
 def repo(tmp_path):
-    try:
-        _git(tmp_path, "init", "-q")
-    except (OSError, subprocess.CalledProcessError):
-        pytest.skip("git is not available")
-    write(tmp_path / "apps" / "hoi" / "run.py", "v = 1\n")
-    write(tmp_path / "docs" / "hoi" / "results.json", {"summary": {"volsmpl": {"iter_ms": 1.0}}})  # no commit recorded
-    _git(tmp_path, "add", ".")
-    _git(tmp_path, "commit", "-q", "-m", "first", date="2026-01-01T00:00:00+00:00")
-    first = _git(tmp_path, "rev-parse", "--short", "HEAD")
-    write(tmp_path / "apps" / "hoi" / "run.py", "v = 2\n")
-    _git(tmp_path, "commit", "-q", "-am", "change the producer", date="2026-01-02T00:00:00+00:00")
-    second = _git(tmp_path, "rev-parse", "--short", "HEAD")
+    results = json.dumps({"summary": {"volsmpl": {"iter_ms": 1.0}}})  # no commit recorded
+    first, second = producer_repo(tmp_path, {"docs/hoi/results.json": results})
     return tmp_path, first, second
 
 
@@ -179,11 +161,11 @@ def test_checkpoint_note_names_only_the_checkpoint_a_result_describes(repo):
     root, first, second = repo
     for stem in ("volsmpl_anny", "coap_anny"):
         write(root / "core" / "assets" / f"{stem}.safetensors", "v1")
-    _git(root, "add", ".")
-    _git(root, "commit", "-q", "-m", "ship both", date="2026-01-03T00:00:00+00:00")
-    made = _git(root, "rev-parse", "--short", "HEAD")
+    git_run(root, "add", ".")
+    git_run(root, "commit", "-q", "-m", "ship both", date="2026-01-03T00:00:00+00:00")
+    made = git_run(root, "rev-parse", "--short", "HEAD")
     write(root / "core" / "assets" / "coap_anny.safetensors", "v2")
-    _git(root, "commit", "-q", "-am", "ship a new coap", date="2026-01-04T00:00:00+00:00")
+    git_run(root, "commit", "-q", "-am", "ship a new coap", date="2026-01-04T00:00:00+00:00")
     metrics = {"metrics": {"iou_mean": 0.9, "iou_surf": 0.85, "iou_unif": 0.95}, "meta": {"git_commit": made}}
 
     def row(extra: dict) -> str:
