@@ -97,6 +97,39 @@ def test_bad_input_gets_one_line(tmp_path, capsys, tiny_ckpt):
     assert "not a number" in capsys.readouterr().err
 
 
+def test_user_frame_of_another_resolution_is_refused(tmp_path):
+    """K, image_size and keypoints must describe one image: K for twice the resolution, [W, H] for [H, W] and a
+    confident keypoint far outside the image are named; a keypoint out of view with confidence 0 is fine."""
+    from volsmpl.apps.egohmr.userframe import load_user_frame
+
+    rng = np.random.default_rng(0)
+    H, W = 480, 640
+    K = [[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]]
+    kp = np.stack([rng.uniform(100, 460, 24), rng.uniform(50, 430, 24)], 1)
+    doc = {"K": K, "image_size": [H, W], "keypoints": kp.tolist(), "conf": [0.9] * 24}
+
+    def load(**change):
+        (tmp_path / "f.json").write_text(json.dumps(dict(doc, **change)))
+        return load_user_frame(tmp_path / "f.json")
+
+    assert np.allclose(load().keypoints, kp)
+    with pytest.raises(ValueError, match=r"principal point \(cx, cy\) = \(639, 479\) lies outside"):
+        load(K=[[1000.0, 0, 639.0], [0, 1000.0, 479.0], [0, 0, 1]])
+    swapped = kp.copy()
+    swapped[0] = [600.0, 200.0]                     # inside a 640-wide image, outside a 480-wide one
+    load(keypoints=swapped.tolist())
+    with pytest.raises(ValueError, match=r"1 keypoints with a confidence above 0 lie outside the image \[H, W\] = "
+                                         r"\[640, 480\] \(joint 0 at \(600, 200\)\)"):
+        load(keypoints=swapped.tolist(), image_size=[W, H])
+    far = kp.copy()
+    far[5] = [-80.0, 100.0]
+    with pytest.raises(ValueError, match="joint 5 at"):
+        load(keypoints=far.tolist())
+    conf = [0.9] * 24
+    conf[5] = 0.0
+    assert load(keypoints=far.tolist(), conf=conf).keypoints[5].tolist() == [0.0, 0.0]
+
+
 @pytest.mark.slow
 def test_user_frame_and_scan_run_end_to_end(tmp_path, frames, tiny_ckpt):
     """A generated frame written as a user's files: the room scan in world millimetres, the camera as

@@ -5,8 +5,13 @@
       "image_size": [H, W],
       "keypoints": [[u, v], ...],                        # the 24 SMPL joints in SMPL order, pixels
       "conf": [c0, ..., c23],                            # detector confidences in [0, 1]; 0 = not detected
+                                                         #   or out of view (confident keypoints lie in the image)
       "world_to_camera": [[...], [...], [...], [...]]    # optional 4x4 (OpenCV camera axes: x right, y down,
     }                                                    #   z forward); absent: the scene file is in camera coordinates
+
+K, image_size and the keypoints describe one image: a principal point outside the image's central 80 % or a
+confident keypoint more than 5 % of the image outside it is refused (the signs of K or keypoints made for another
+resolution, or of [W, H] given for [H, W], which would otherwise silently scale the network's input).
 
 The scene file (`--scene`, read by volsmpl.scene.scan, `--units` m / cm / mm, `--up` y or z) is turned Y-up
 (a z-up scan's (x, y, z) becomes (x, z, -y)) and then mapped by `world_to_camera`, which is therefore given in
@@ -24,6 +29,12 @@ from pathlib import Path
 import numpy as np
 
 from .pose import NUM_JOINTS
+
+
+#: the principal point must lie within this fraction range of the image (a K made for another resolution does not)
+CENTRE = (0.1, 0.9)
+#: keypoints with a confidence above 0 may lie at most this fraction of the image size outside it (detector slack)
+OUTSIDE = 0.05
 
 
 @dataclass
@@ -75,6 +86,21 @@ def load_user_frame(path) -> UserFrame:
         raise ValueError(f"{where}: 'conf' values must lie in [0, 1]")
     if (conf > 0).sum() < 4:
         raise ValueError(f"{where}: only {(conf > 0).sum()} keypoints have a confidence above 0; at least 4 are needed")
+    H, W = float(size[0]), float(size[1])
+    cx, cy = K[0, 2], K[1, 2]
+    if not (CENTRE[0] * W <= cx <= CENTRE[1] * W and CENTRE[0] * H <= cy <= CENTRE[1] * H):
+        raise ValueError(f"{where}: the principal point (cx, cy) = ({cx:g}, {cy:g}) lies outside the central part of "
+                         f"image_size [H, W] = [{H:g}, {W:g}]: K is probably for another resolution (scale fx, fy, "
+                         f"cx, cy by the ratio of the sizes) or image_size is [W, H]; give K, image_size and keypoints "
+                         f"of one image")
+    seen = conf > 0
+    off = seen & ((kp[:, 0] < -OUTSIDE * W) | (kp[:, 0] > (1 + OUTSIDE) * W)
+                  | (kp[:, 1] < -OUTSIDE * H) | (kp[:, 1] > (1 + OUTSIDE) * H))
+    if off.any():
+        j = int(np.flatnonzero(off)[0])
+        raise ValueError(f"{where}: {int(off.sum())} keypoints with a confidence above 0 lie outside the image "
+                         f"[H, W] = [{H:g}, {W:g}] (joint {j} at ({kp[j, 0]:g}, {kp[j, 1]:g})): give keypoints in "
+                         f"pixels of that image (u along W, v along H), and confidence 0 for joints out of view")
     T = _array(d, "world_to_camera", (4, 4), where) if "world_to_camera" in d else np.eye(4)
     R = T[:3, :3]
     if not np.allclose(T[3], [0, 0, 0, 1]) or not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
