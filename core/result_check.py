@@ -107,7 +107,7 @@ def compare_results(stored: dict, fresh: dict, rel_tol: float = 1e-6, abs_tol: f
         if d is not None:
             worst = max(worst, d)
             mismatches.append({"case": case, "value": path, "stored": s, "fresh": v})
-    return {"agree": not mismatches, "cases_compared": len(common), "cases_total": len(old_cases),
+    return {"agree": not mismatches and n > 0, "cases_compared": len(common), "cases_total": len(old_cases),
             "values_compared": n, "max_abs_diff": worst if mismatches else 0.0, "mismatches": mismatches[:10],
             "n_mismatches": len(mismatches), "missing": sorted(new_cases - old_cases)[:10], "rel_tol": rel_tol,
             "abs_tol": abs_tol}

@@ -54,6 +54,9 @@ def test_compare_agrees_on_same_values_other_timings_and_names_a_difference():
     assert compare_results(STORED, fresh_of("a", **{"volsmpl/a": 1.0 + 1e-4}), rel_tol=1e-3)["agree"]
     with pytest.raises(ValueError, match="shares no case"):
         compare_results(STORED, {"cases": {"volsmpl": [rec("zzz", "volsmpl", 1.0, 1.0)]}})
+    timing_only = {"cases": {"volsmpl": [{"name": "a", "model": "volsmpl", "ms_per_iter": 1.0}]}}
+    with pytest.raises(ValueError, match="shares no case"):        # nothing compared vouches for nothing
+        compare_results(STORED, timing_only)
     with pytest.raises(ValueError, match="no per-case records"):
         compare_results({"summary": {}}, fresh_of("a"))
 
