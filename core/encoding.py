@@ -42,6 +42,7 @@ class Encoding:
     parts: torch.Tensor | None = None
     slot: torch.Tensor | None = None
     grouped: tuple | None = None  # the code's per-group layer matrices (grouped engine), made on first use
+    graph: bool = True  # made with autograd on (set when cached): one made under no_grad has no graph to serve
 
     def encoded(self, num_parts: int) -> torch.Tensor:
         """(K,) bool: which parts have a code."""
@@ -87,6 +88,7 @@ class EncodingCache:
     def _store(self, out, enc: Encoding, key: tuple) -> None:
         """Cache `enc` on the output (and, for a constant output, as the last encoding for value reuse)."""
         enc.key = key
+        enc.graph = torch.is_grad_enabled()
         try:
             out._volsmpl_encoding = (self, enc)
         except AttributeError:  # outputs that take no attributes are re-encoded on every call
@@ -133,15 +135,19 @@ class EncodingCache:
 
     def _cached(self, out, key: tuple) -> Encoding | None:
         """The encoding made earlier of `out` (or of an equal constant output) by this volume with the same
-        weights: same content fingerprints (`key` = cache_key(out)), else None."""
+        weights: same content fingerprints (`key` = cache_key(out)), else None. One made under torch.no_grad()
+        is not served where gradients may flow (the output or a weight requires grad): it has no graph, and the
+        gradients of the poses, shapes or weights would be lost (None or 0)."""
+        constant = not (out.vertices.requires_grad or out.joints.requires_grad or out.full_pose.requires_grad)
         cached = getattr(out, "_volsmpl_encoding", None)
-        if cached is not None and cached[0] is self and cached[1].key == key:
-            return cached[1]
+        found = cached[1] if cached is not None and cached[0] is self and cached[1].key == key else None
         last = self._last
-        if last is not None and last.key == key and not (
-                out.vertices.requires_grad or out.joints.requires_grad or out.full_pose.requires_grad):
-            return last  # same pose, shape and translation as the previous constant output, same weights
-        return None
+        if found is None and constant and last is not None and last.key == key:
+            found = last  # same pose, shape and translation as the previous constant output, same weights
+        if found is not None and not found.graph and torch.is_grad_enabled() and not (
+                constant and not any(p.requires_grad for p in self.parameters())):
+            return None
+        return found
 
 
 __all__ = ["Encoding", "EncodingCache"]

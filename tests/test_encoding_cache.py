@@ -173,3 +173,37 @@ def test_fingerprint_detects_single_bit_and_swaps():
     assert fingerprint([y]) != base
     assert fingerprint([x.double()]) != base and fingerprint([x.reshape(7, 143)]) != base
     assert fingerprint([x[1:]]) == fingerprint([x[1:].clone()])  # unaligned views read like copies
+
+
+@pytest.mark.parametrize("frozen", [False, True])
+@pytest.mark.parametrize("loss", ["query", "collision_loss", "selfpen_loss"])
+def test_encoding_made_without_graph_is_not_served_to_a_gradient(tiny_config, loss, frozen):
+    """An output queried under torch.no_grad() (a logged value) and then in a loss: the loss's pose and weight
+    gradients are those of an output never queried before (before: the cached graph-free encoding answered, the
+    pose gradient was None and collision_loss's exactly 0 against a maximum of ~7; frozen weights or not)."""
+    torch.manual_seed(3)
+    b = volsmpl.create_body()
+    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).eval().requires_grad_(not frozen)
+    p = {k: v.clone().requires_grad_() for k, v in random_pose(2, scale=0.8, seed=8).items()}
+    pts = _points(b(**p), 500)
+
+    def value(out):
+        if loss == "selfpen_loss":
+            return vol.selfpen_loss(out, generator=torch.Generator().manual_seed(0)).sum()
+        return getattr(vol, loss)(out, pts).square().sum()
+
+    wrt = [p["body_pose"], *(w for w in vol.parameters() if w.requires_grad)]
+    ref_val = value(b(**p))
+    ref = torch.autograd.grad(ref_val, wrt, allow_unused=True)
+    out = b(**p)
+    with torch.no_grad():
+        vol.query(out, pts)
+        vol.selfpen_loss(out, generator=torch.Generator().manual_seed(0))
+    val = value(out)
+    got = torch.autograd.grad(val, wrt, allow_unused=True)
+    assert torch.allclose(val, ref_val)
+    assert ref[0].abs().max() > 0
+    for r, g in zip(ref, got):
+        assert (r is None) == (g is None)
+        if r is not None:
+            assert torch.allclose(g, r, atol=1e-6 + 1e-5 * float(r.abs().max())), float((g - r).abs().max())
