@@ -4,12 +4,14 @@ from __future__ import annotations
 import torch
 
 
-def check_points(points, like: torch.Tensor) -> torch.Tensor:
+def check_points(points, like: torch.Tensor, finite: bool = True) -> torch.Tensor:
     """Validate query points against a body output's vertices.
 
     Args:
         points: (B, N, 3), or (N, 3) shared by all B bodies (expanded, no copy).
-        like: out.vertices (B, V, 3): fixes B, dtype and device.
+        like: out.vertices (B, V, 3) (or any (B, ...) tensor of the bodies): fixes B, dtype and device.
+        finite: also refuse NaN or Inf (one pass over the points and a host sync; False where NaN may
+            propagate to the values).
     Returns:
         (B, N, 3) points.
     """
@@ -29,6 +31,8 @@ def check_points(points, like: torch.Tensor) -> torch.Tensor:
         raise TypeError(f"points are {points.dtype} but the body output is {like.dtype}; convert with points.to({like.dtype}).")
     if points.device != like.device:
         raise ValueError(f"points are on {points.device} but the body output is on {like.device}; move them with points.to('{like.device}').")
+    if not finite:
+        return points
     bad = ~torch.isfinite(points).all(dim=-1)
     if bad.any():
         raise ValueError(f"points contain NaN or Inf ({int(bad.sum())} of {bad.numel()} points); remove or fix them before querying.")

@@ -357,7 +357,9 @@ class Volume(EncodingCache, BodyVolume):
         """`query` on an explicit encoding (training encodes with fresh surface samples). points (B, N, 3) -> (B, N).
         A subset encoding must have a code for every part whose box holds a point (else those parts are
         skipped); `query` ensures it. outside=False may answer +inf instead of the box distance at points in no
-        padded part box (the lean path skips those distances; see collision_loss)."""
+        padded part box (the lean path skips those distances; see collision_loss). points may be (N, 3) (every
+        body); NaN or Inf points are not checked here (no host sync): their values are NaN."""
+        points = check_points(points, enc.G, finite=False)  # (1, N, 3) for B > 1 bodies: refused (not body 0 alone)
         dense = self.dense if dense is None else dense
         B, N = points.shape[:2]
         if self.is_sdf and not dense and self.engine == "lean":

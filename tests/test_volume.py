@@ -316,6 +316,25 @@ def test_empty_and_bad_points(vbody):
         vol.selfpen_loss(out, tau=0.0)
 
 
+def test_query_encoded_pairs_points_with_bodies(vbody):
+    """query_encoded (the apps' and training's query on an explicit encoding) takes the points as `query` does:
+    (N, 3) shared by every body gives each body's dense values, (1, N, 3) for 2 bodies is refused in one line
+    (before: the lean path answered body 0 only, shape (1, N), while the dense path broadcast to (2, N); (N, 3)
+    failed inside a reshape)."""
+    vol = vbody.volume
+    with torch.no_grad():
+        out = vbody(**random_pose(2, seed=11))
+        pts = _near_points(out, 300, seed=11)[0]
+        enc = vol.encode(out)
+        ref = vol.query(out, pts[None].expand(2, -1, -1), dense=True)
+        assert torch.allclose(vol.query_encoded(enc, pts), ref, atol=1e-6)
+        for dense in (False, True):
+            with pytest.raises(ValueError, match="1 bodies but the body output has 2"):
+                vol.query_encoded(enc, pts[None], dense=dense)
+        with pytest.raises(TypeError, match="float64"):
+            vol.query_encoded(enc, pts.double())
+
+
 def test_selfpen_runs(vbody):
     out = vbody(**random_pose(2, scale=0.8, seed=8))
     loss, pts = vbody.volume.selfpen_loss(out, return_points=True, generator=torch.Generator().manual_seed(0))
