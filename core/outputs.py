@@ -13,11 +13,12 @@ Its errors are ValueError (the CLI prints them as one line, exit 2).
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import tempfile
 from pathlib import Path
 
-__all__ = ["check_writable", "exclusive_folder", "write_atomic"]
+__all__ = ["check_writable", "exclusive_folder", "write_atomic", "file_sha256"]
 
 
 def _probe(folder: Path) -> None:
@@ -118,3 +119,12 @@ def exclusive_folder(folder, who: str):
         yield folder
     finally:
         fh.close()  # closing releases the lock
+
+
+def file_sha256(path) -> str:
+    """'sha256:<hex>' of a file's bytes (read in 1 MiB blocks)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return "sha256:" + h.hexdigest()

@@ -29,7 +29,7 @@ from typing import Callable
 
 from volsmpl import report_sections as rs
 from volsmpl.outputs import check_writable, write_atomic
-from volsmpl.result_check import check_for, write_check
+from volsmpl.result_check import check_for, check_path, write_check
 
 _HERE = Path(__file__).resolve().parent.parent
 #: the repository root of the source checkout (core/ -> root); else (an installed package) the working directory
@@ -404,7 +404,7 @@ def run(args) -> int:
         c = write_check(stored, fresh, rel_tol=args.verify_tol)
         print(f"{name}: {c['cases_compared']} of {c['cases_total']} cases compared, {c['values_compared']} values, "
               + ("all agree" if c["agree"] else f"{c['n_mismatches']} differ (largest {c['max_abs_diff']:g})")
-              + f"; wrote {stored.with_name(stored.stem + '.check.json')}")
+              + f"; wrote {check_path(stored)}")
     text, status = build_report(out, ROOT, overrides)
     write_atomic(out, text)
     print(f"wrote {out}: " + "; ".join(f"{k}: {', '.join(v) or 'none'}" for k, v in status.items()))

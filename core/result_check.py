@@ -16,24 +16,20 @@ Agreement means every compared number within `rel_tol` (relative) or `abs_tol` (
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import re
 from pathlib import Path
 
-__all__ = ["IGNORED", "ID_KEYS", "case_leaves", "compare_results", "write_check", "check_path", "check_for",
-           "file_sha256"]
+from .outputs import file_sha256, write_atomic
+
+__all__ = ["IGNORED", "ID_KEYS", "case_leaves", "compare_results", "write_check", "check_path", "check_for"]
 
 #: per-record fields that name a case (in this order in its label)
 ID_KEYS = ("model", "w", "scene", "sequence", "name", "frame")
 #: leaf names that measure the run, not the result: times, memory and what is derived from them
 IGNORED = re.compile(r"(^|_)(ms|s|sec|seconds|mem|mb|gb|bytes|time|wall|memory)(_|$)|per_iter|max_batch|max_frames|"
                      r"^batch$|^meta$|^date$|^git_commit$")
-
-
-def file_sha256(path) -> str:
-    return "sha256:" + hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def _label(i: int, rec) -> str:
@@ -59,8 +55,8 @@ def case_leaves(cases) -> dict:
         elif isinstance(obj, list) and obj and all(isinstance(x, dict) for x in obj):
             for i, rec in enumerate(obj):   # a record: its identifying fields name it, they are not values
                 label = _label(i, rec)
-                walk({k: v for k, v in rec.items() if not label.startswith("#") and k not in ID_KEYS} or rec,
-                     "/".join(filter(None, (case, *path, label))), ())
+                values = rec if label.startswith("#") else {k: v for k, v in rec.items() if k not in ID_KEYS}
+                walk(values or rec, "/".join(filter(None, (case, *path, label))), ())
         elif isinstance(obj, list):
             for i, v in enumerate(obj):
                 walk(v, case, path + (str(i),))
@@ -121,8 +117,6 @@ def check_path(result: Path) -> Path:
 
 def write_check(result: Path, fresh_path: Path, rel_tol: float = 1e-6, abs_tol: float = 1e-9) -> dict:
     """Compare the fresh run's results.json with the stored `result` and write the check beside it; returns it."""
-    from .outputs import write_atomic
-
     stored, fresh = (json.loads(Path(p).read_text(encoding="utf-8")) for p in (result, fresh_path))
     check = compare_results(stored, fresh, rel_tol, abs_tol)
     meta = fresh.get("meta", {}) if isinstance(fresh.get("meta"), dict) else {}

@@ -24,7 +24,6 @@ Example (continue a run on another machine: copy the folder, then)::
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -33,6 +32,7 @@ from pathlib import Path
 import torch
 
 from .checkpoint import load_checkpoint, save_checkpoint
+from .outputs import file_sha256
 
 STATE_FORMAT = "volsmpl-train-state"
 STATE_VERSION = 2
@@ -41,15 +41,6 @@ SHARD_BYTES = 16_000_000
 
 class TrainStateError(RuntimeError):
     """A training-state folder is incomplete, damaged, or belongs to another run configuration."""
-
-
-def file_sha256(path: str | os.PathLike) -> str:
-    """'sha256:<hex>' of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return "sha256:" + h.hexdigest()
 
 
 def _tensor_bytes(t: torch.Tensor) -> int:
