@@ -11,7 +11,7 @@ and a later query grows the cached encoding by the parts it needs.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 
@@ -50,6 +50,22 @@ class Encoding:
             return torch.ones(num_parts, dtype=torch.bool, device=self.G.device)
         return self.slot >= 0
 
+    def with_constant_code(self) -> "Encoding":
+        """This encoding with its part codes detached from autograd (frames and boxes keep their graph): what
+        an encoding made with code_grad=False holds (Volume.selfpen_loss)."""
+        if self.code is None:
+            return self
+        return replace(self, code=_detached(self.code), grouped=None, key=None)
+
+
+def _detached(field):
+    """A code field (tensor, tuple of tensors or None) without autograd history."""
+    if isinstance(field, torch.Tensor):
+        return field.detach()
+    if isinstance(field, tuple):
+        items = [_detached(f) for f in field]
+        return type(field)(*items) if hasattr(field, "_fields") else tuple(items)
+    return field
 
 
 class EncodingCache:

@@ -438,6 +438,8 @@ class Volume(EncodingCache, BodyVolume):
             # encode only the parts of overlapping pairs: no other part can be involved (docstring)
             parts = None if need.all() else need.nonzero()[:, 0]
             enc = self._encode(out, None, parts=parts, frames=(G, box_min, box_max), code_grad=code_grad)
+        elif not code_grad:
+            enc = enc.with_constant_code()  # a cached encoding made by a query has its codes' graph
         part, _ = self._part_values(enc, padded, self.dense)  # (B, K, M)
         return reduce_selfpen(part, self.occupied(part), mask, samples, self.selfpen_penalty(tau), return_points)
 

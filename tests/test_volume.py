@@ -616,9 +616,11 @@ def test_selfpen_rigid_code_gradient():
     enc = vol.net.encode
     vol.net.encode = lambda local, *a: seen.append(torch.is_grad_enabled()) or enc(local, *a)
 
-    def loss_grad(pose, code_grad):
+    def loss_grad(pose, code_grad, queried=False):
         pose = pose.clone().requires_grad_(True)
         out = b(betas=case.betas[None], global_orient=case.global_orient[None], body_pose=pose)
+        if queried:  # a query first caches an encoding whose codes carry their graph
+            vol.query(out, out.vertices.detach())  # every part holds a vertex: all encoded
         loss = vol.selfpen_loss(out, generator=torch.Generator().manual_seed(0), code_grad=code_grad)[0]
         return loss.detach(), torch.autograd.grad(loss, pose)[0]
 
@@ -627,6 +629,12 @@ def test_selfpen_rigid_code_gradient():
     l_rigid, g_rigid = loss_grad(p0, False)
     assert seen == [True, False]
     torch.testing.assert_close(l_full, l_rigid)
+    # on an output already encoded (with the codes' graph) by a query, code_grad=False still holds the codes
+    # constant: the rigid gradient, not the full one
+    l_cached, g_cached = loss_grad(p0, False, queried=True)
+    torch.testing.assert_close(l_cached, l_rigid)
+    torch.testing.assert_close(g_cached, g_rigid, rtol=1e-4, atol=1e-6)
+    assert (g_cached - g_full).abs().max() > 10 * (g_cached - g_rigid).abs().max()
     # 0.963 on this case with the shipped checkpoint (runs/volsmpl_b8p step 33,000; earlier checkpoints 0.931 .. 0.958;
     # lowest of the 17 cases: 0.879, sitting_on_heels; median 0.997)
     assert torch.nn.functional.cosine_similarity(g_full.flatten(), g_rigid.flatten(), dim=0) > 0.88
