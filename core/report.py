@@ -7,7 +7,9 @@ run, nothing is fetched), and writes docs/report.md: per section our tables besi
 the figures, and where each result came from (checkpoint, device, commit, date; "not recorded" where a JSON
 lacks them). A result is flagged stale when the code that produces it changed after it was made: the commit
 recorded in the JSON (else its recorded date, else the commit that last touched the JSON file itself, else the
-file's mtime) is compared with `git log -1 -- <producer paths>`; a stale result is current again when some of its
+file's mtime) is compared with `git log -1 -- <producer paths>`, the producer paths being the section's code, every
+repository module it imports (volsmpl.import_closure: an app's table goes stale when core code it calls changes)
+and the default body's data; a stale result is current again when some of its
 cases, made again at or after the producer's last change, agree with it (`--verify NAME=PATH` stores that check
 beside the result: volsmpl.result_check). Without git the report says so. The sections
 missing results are listed with the command that produces each. --check exits 1 when a result is stale or
@@ -28,6 +30,7 @@ from pathlib import Path
 from typing import Callable
 
 from volsmpl import report_sections as rs
+from volsmpl.import_closure import producer_closure
 from volsmpl.outputs import check_writable, write_atomic
 from volsmpl.result_check import check_for, check_path, write_check
 
@@ -40,7 +43,8 @@ ROOT = _HERE if (_HERE / "pyproject.toml").exists() else Path.cwd()
 class Section:
     """One report section. results: result name -> default path(s) relative to the repository root (the first
     that exists is read); the first result is the section's main one. commands: result name -> the command that
-    produces it. producer: repository paths of the code that writes the results (staleness). checkpoints:
+    produces it. producer: repository paths of the code that writes the results (staleness; with every module
+    they import, volsmpl.import_closure, and the default body's data files). checkpoints:
     repository paths of the checkpoints the results may describe (a later change is noted)."""
     title: str
     paper: tuple
@@ -53,6 +57,9 @@ class Section:
 
 
 _CKPTS = ("core/assets/volsmpl_anny.safetensors", "core/assets/coap_anny.safetensors")
+#: the default body's data: every result poses it
+_BODY_DATA = ("core/assets/anny_body.json", "core/assets/anny_shapes.npz", "core/assets/anny_smpl_neutral.npz",
+              "core/assets/anny_smplx_neutral.npz")
 
 
 def _app(name: str, tables: tuple, title: str) -> Section:
@@ -131,6 +138,10 @@ class Git:
         sha, ct, subject = (out.split(" ", 2) + [""])[:3]
         return sha, int(ct), (subject if len(subject) <= 90 else subject[:87] + "...")
 
+    def changed_files(self, since: str, paths) -> list[str]:
+        """Files among paths that differ between commit `since` and HEAD."""
+        return (self._out("diff", "--name-only", f"{since}..HEAD", "--", *paths) or "").split()
+
     def commit_time(self, rev: str) -> int | None:
         out = self._out("show", "-s", "--format=%ct", f"{rev}^{{commit}}")
         return int(out) if out and out.isdigit() else None
@@ -180,7 +191,7 @@ def staleness(path: Path, prov: dict, section: Section, git: Git) -> tuple[str, 
     at = check.get("fresh_commit")
     if not (at and git.commit_time(at) is not None):
         return verdict, f"{why}; its re-run check records no commit of this repository"
-    later = git.last_change(section.producer, since=at)
+    later = git.last_change(producer_paths(section, git), since=at)
     if later:
         return verdict, f"{why}; its re-run check (at {at}) predates {later[0]}"
     if not check.get("agree"):
@@ -188,7 +199,19 @@ def staleness(path: Path, prov: dict, section: Section, git: Git) -> tuple[str, 
                          f"{check.get('cases_compared')} cases (e.g. {_mismatch(check)})")
     return "current", (f"re-run check at {at} (not before the producer's last change): {check['cases_compared']} of "
                        f"{check['cases_total']} cases made again, all {check['values_compared']} values agree "
-                       f"(rel. {check['rel_tol']:g}); {why}")
+                       f"(rel. {check['rel_tol']:g}; times and memory are not compared); {why}")
+
+
+def _changed(git: Git, since: str, paths) -> str:
+    """The producer files changed after commit `since`, a few named (the result's own code, or code it imports)."""
+    files = git.changed_files(since, paths)
+    shown = ", ".join(files[:4]) + (f" and {len(files) - 4} more" if len(files) > 4 else "")
+    return shown or "files since removed"
+
+
+def producer_paths(section: Section, git: Git) -> tuple[str, ...]:
+    """The section's producer paths, the repository modules they import (transitively) and the body's data."""
+    return producer_closure(section.producer + _BODY_DATA, git.root)
 
 
 def _mismatch(check: dict) -> str:
@@ -200,16 +223,17 @@ def _staleness(path: Path, prov: dict, section: Section, git: Git) -> tuple[str,
     """staleness by commits and dates alone."""
     if not git.available:
         return "unknown", f"not checked: git unavailable ({git.reason})"
-    code = git.last_change(section.producer)
+    paths = producer_paths(section, git)
+    code = git.last_change(paths)
     if code is None:
         return "unknown", f"not checked: {', '.join(section.producer)} has no commit in this repository"
-    dirty = " (the producer code also has uncommitted changes)" if git.dirty(section.producer) else ""
+    dirty = " (the producer code also has uncommitted changes)" if git.dirty(paths) else ""
     commit = prov["commit"] if prov["commit"] != "not recorded" else None
     if commit and git.commit_time(commit) is not None:
-        later = git.last_change(section.producer, since=commit)
+        later = git.last_change(paths, since=commit)
         if later:
-            return "stale", f"made at commit {commit}; the producer code changed after it: {later[0]} " \
-                            f"({_day(later[1])}) {later[2]}{dirty}"
+            return "stale", f"made at commit {commit}; the producer code changed after it ({_changed(git, commit, paths)}): " \
+                            f"last {later[0]} ({_day(later[1])}) {later[2]}{dirty}"
         return "current", f"made at commit {commit}, after the last change of the producer code ({code[0]}){dirty}"
     when, basis = None, ""
     if prov["date"] != "not recorded":

@@ -107,6 +107,26 @@ def test_stale_when_the_producer_changed_after_the_recorded_commit(repo):
     assert verdict == "stale" and f"committed in {first}" in line
 
 
+def test_stale_when_core_code_the_app_imports_changed(tmp_path):
+    """An app table depends on the core modules its code imports: a change there makes it stale (naming the
+    file); a change to core code it does not import leaves it current."""
+    files = {"apps/hoi/run.py": "from volsmpl.volume import query\n", "core/__init__.py": "",
+             "core/volume.py": "def query():\n    return 1\n", "core/unrelated.py": "x = 1\n"}
+    first, second = producer_repo(tmp_path, files)
+    (tmp_path / "apps/hoi/run.py").write_text("from volsmpl.volume import query\nv = 2\n")
+    git_run(tmp_path, "commit", "-q", "-am", "the app itself", date="2026-01-02T00:00:00+00:00")
+    made = git_run(tmp_path, "rev-parse", "--short", "HEAD")
+    data = {"summary": {}, "meta": {"git_commit": made}}
+    assert _verdict(tmp_path, data)[0] == "current"
+    (tmp_path / "core/unrelated.py").write_text("x = 2\n")
+    git_run(tmp_path, "commit", "-q", "-am", "unrelated core", date="2026-01-03T00:00:00+00:00")
+    assert _verdict(tmp_path, data)[0] == "current"
+    (tmp_path / "core/volume.py").write_text("def query():\n    return 2\n")
+    git_run(tmp_path, "commit", "-q", "-am", "the engine", date="2026-01-04T00:00:00+00:00")
+    verdict, line = _verdict(tmp_path, data)
+    assert verdict == "stale" and "core/volume.py" in line and "the engine" in line
+
+
 def test_git_unavailable_is_said_not_guessed(tmp_path):
     write(tmp_path / "docs" / "hoi" / "results.json", HOI)
     text, status = report.build_report(tmp_path / "r.md", root=tmp_path, git=report.Git(tmp_path / "nowhere"))
