@@ -60,6 +60,13 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
         return volume
     from .volume import Volume
 
+    if checkpoint is not None and not pretrained:
+        raise ValueError(f"attach_volume: checkpoint={str(checkpoint)!r} with pretrained=False would give random "
+                         f"weights and ignore the checkpoint; drop pretrained=False to load it, or the checkpoint "
+                         f"for random weights.")
+    if config is not None and pretrained:
+        raise ValueError(f"attach_volume: config is the architecture of random weights (pretrained=False) and would "
+                         f"be ignored: a checkpoint carries its own; pass pretrained=False with it, or drop config.")
     meta, state = {}, None
     if pretrained:
         path = Path(checkpoint) if checkpoint is not None else kind.default_checkpoint

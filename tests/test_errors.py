@@ -172,6 +172,24 @@ def test_attach_volume_refuses_a_non_body(bad):
     assert type(bad).__name__ in str(e.value) and "\n" not in str(e.value)
 
 
+@pytest.mark.parametrize("model", ["volsmpl", "coap"])
+def test_attach_volume_refuses_an_argument_it_would_ignore(tiny_config, model):
+    """checkpoint=... with pretrained=False gave random weights, the checkpoint unread; config=... with the
+    pretrained default was replaced by the checkpoint's own: both silently. Both are refused in one line."""
+    from volsmpl.models import model_kind
+    kind = model_kind(model)
+    b = volsmpl.create_body()
+    with pytest.raises(ValueError, match="pretrained=False would give random weights") as e:
+        volsmpl.attach_volume(b, model=model, checkpoint=kind.default_checkpoint, pretrained=False)
+    assert "\n" not in str(e.value)
+    cfg = tiny_config if model == "volsmpl" else kind.default_config()
+    with pytest.raises(ValueError, match="config is the architecture of random weights") as e:
+        volsmpl.attach_volume(b, model=model, config=cfg)
+    assert "\n" not in str(e.value) and not hasattr(b, "volume")
+    assert volsmpl.attach_volume(b, model=model, pretrained=False, config=cfg).kind == model  # the meant uses
+    assert volsmpl.attach_volume(b, model=model, checkpoint=kind.default_checkpoint).kind == model
+
+
 # ------------------------------------------------------------------------------------ 4. extract_mesh arguments
 
 @pytest.fixture(scope="module")
