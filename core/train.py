@@ -72,7 +72,7 @@ from .checkpoint import load_checkpoint
 from .models import model_kind
 from .outputs import exclusive_folder, write_atomic
 from .train_batches import StepProfile, batch_stream, write_profile
-from .train_config import TrainConfig, lr_at
+from .train_config import TrainConfig, lr_at, parse_set, read_config_file
 from .train_state import latest_checkpoint, load_optimizer, read_training_state, save_training_state
 
 
@@ -379,12 +379,10 @@ def run(args) -> int:
         raise ValueError(f"--max-hours {args.max_hours}: give a finite number of hours > 0.")
     d = {}
     if args.config:
-        d = json.loads(Path(args.config).read_text())
+        d = read_config_file(args.config)
     elif args.resume and (Path(args.out) / "config.json").exists():
-        d = json.loads((Path(args.out) / "config.json").read_text())
-    for kv in args.set:
-        k, _, v = kv.partition("=")
-        d[k] = json.loads(v) if v[:1] in "0123456789-[{tf" else v
+        d = read_config_file(Path(args.out) / "config.json", "the run's config")
+    d.update(parse_set(args.set))
     cfg = TrainConfig.from_dict(d)
     if args.init and not args.config and not args.set:
         meta = json.loads(Path(str(args.init).removesuffix(".safetensors") + ".json").read_text())["meta"]

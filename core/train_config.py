@@ -6,9 +6,11 @@ The loss terms these fields control are described in `volsmpl.train`'s module do
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import numbers
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from .body.poses import check_pose_mode
 from .groundtruth import GT_BACKENDS, SIGN_MODES
@@ -154,3 +156,41 @@ def lr_at(cfg: TrainConfig, step: int) -> float:
     """Exponential annealing from lr (at step cfg.anneal_start and before) to lr_final (at cfg.steps)."""
     t = (step - cfg.anneal_start) / (cfg.steps - cfg.anneal_start)
     return cfg.lr * (cfg.lr_final / cfg.lr) ** min(1.0, max(0.0, t))
+
+
+def read_config_file(path, what: str = "--config") -> dict:
+    """The JSON object of a training-config file; ValueError in one line naming the file for a missing, unreadable
+    or non-JSON file, or one that does not hold an object of TrainConfig fields."""
+    try:
+        text = Path(path).read_text()
+    except OSError as e:
+        raise ValueError(f"{what} {path}: cannot read it ({e.strerror or type(e).__name__}); give a JSON file of "
+                         f"training config fields (a run's config.json, or a checkpoint JSON's "
+                         f"meta.training.train_config).") from None
+    try:
+        d = json.loads(text)
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"{what} {path} is not valid JSON ({e}); give a JSON object of training config fields.") from None
+    if not isinstance(d, dict):
+        raise ValueError(f"{what} {path} holds a JSON {type(d).__name__}, not an object of training config fields "
+                         f"(e.g. {{\"batch_size\": 4}}).")
+    return d
+
+
+def parse_set(items) -> dict:
+    """`--set KEY=VALUE ...` -> {key: value}: a VALUE that reads as JSON (numbers, true/false, lists, objects) is
+    that value, anything else (gt_backend=torch, gt_sign=fast_winding) the string itself. ValueError in one line for
+    an item without '=' or an unreadable list or object."""
+    d = {}
+    for kv in items:
+        k, eq, v = kv.partition("=")
+        if not eq or not k.strip():
+            raise ValueError(f"--set {kv!r}: give KEY=VALUE, e.g. --set batch_size=4 gt_backend=torch.")
+        try:
+            d[k.strip()] = json.loads(v)
+        except json.JSONDecodeError as e:
+            if v.strip()[:1] in "[{":
+                raise ValueError(f"--set {k.strip()}: {v!r} is not valid JSON ({e}); quote the whole item, e.g. "
+                                 f"'surface_sigma=[0.01,0.05]' or 'model={{\"latent_dim\": 64}}'.") from None
+            d[k.strip()] = v
+    return d

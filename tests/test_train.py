@@ -371,3 +371,30 @@ def test_five_training_steps_on_cuda_with_the_torch_ground_truth(tmp_path):
     assert res["step"] == 5 and all(math.isfinite(x) for x in res["losses"])
     rows = [json.loads(x) for x in (tmp_path / "c" / "profile.jsonl").read_text().splitlines()]
     assert len(rows) == 5 and all(r["device"].startswith("cuda") for r in rows)
+
+
+def test_cli_set_takes_string_values_and_config_errors_name_the_file(tmp_path, capsys):
+    """`--set gt_backend=torch` (README) and `--set gt_sign=fast_winding` ended in 'Expecting value: line 1 column 1
+    (char 0)' (a value starting with t or f was parsed as JSON); a bad --config file or --set item gave json's bare
+    message without the file or the option. Strings are kept; each problem is one line naming the input."""
+    from volsmpl.cli import main
+
+    cfgf = tmp_path / "tiny.json"
+    cfgf.write_text(json.dumps(tiny_cfg().to_dict()))
+    run = tmp_path / "run"
+    assert main(["train", "--config", str(cfgf), "--out", str(run), "--max-steps", "0", "--device", "cpu",
+                 "--set", "gt_backend=torch", "gt_sign=fast_winding", "batch_size=3", "surface_sigma=[0.02]"]) == 0
+    saved = json.loads((run / "config.json").read_text())
+    assert (saved["gt_backend"], saved["gt_sign"], saved["batch_size"], saved["surface_sigma"]) == \
+        ("torch", "fast_winding", 3, [0.02])
+    capsys.readouterr()
+    (tmp_path / "list.json").write_text("[1, 2]")
+    (tmp_path / "bad.json").write_text("{bad")
+    for argv, words in [(["--config", str(tmp_path / "bad.json")], ["bad.json", "not valid JSON"]),
+                        (["--config", str(tmp_path / "list.json")], ["list.json", "JSON list"]),
+                        (["--config", str(tmp_path / "none.json")], ["none.json", "cannot read"]),
+                        (["--set", "batch_size"], ["--set 'batch_size'", "KEY=VALUE"]),
+                        (["--set", "model={bad"], ["--set model", "not valid JSON"])]:
+        assert main(["train", "--out", str(tmp_path / "r2"), "--max-steps", "0", *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and all(w in err for w in words), err
