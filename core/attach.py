@@ -29,7 +29,7 @@ def _check_body(body) -> None:
 
 def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool = True, model: str = "volsmpl",
                   config=None, dense: bool = False, trainable: bool | None = None):
-    """Attach a volumetric model as `body.volume` (and return it).
+    """Attach a volumetric model as `body.volume` (and return it), on the body's device and in its float dtype.
 
     Args:
         body: volsmpl.Body or smplx SMPL / SMPL-H / SMPL-X model.
@@ -55,7 +55,7 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
         from .mesh_volume import MeshVolume
         if checkpoint is not None or config is not None:
             raise ValueError(f"model '{model}' has no weights: pass neither checkpoint nor config")
-        volume = MeshVolume(Partition(body), fp).to(body.v_template.device)
+        volume = MeshVolume(Partition(body), fp).to(body.v_template.device, _float_dtype(body))
         _attach(body, volume)
         return volume
     from .volume import Volume
@@ -88,12 +88,19 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
         except RuntimeError as e:
             raise ValueError(f"checkpoint {checkpoint} does not fit the {model} network for this body "
                              f"({partition.num_parts} parts): {str(e)[:300]}") from e
-    volume = Volume(net, partition, fp, dense=dense).to(body.v_template.device)
+    volume = Volume(net, partition, fp, dense=dense).to(body.v_template.device, _float_dtype(body))
     volume.meta = meta
     volume.eval()
     volume.requires_grad_(not pretrained if trainable is None else bool(trainable))
     _attach(body, volume)
     return volume
+
+
+def _float_dtype(body):
+    """The floating dtype of a body's vertices (a body moved by .double() before attach_volume gets a float64
+    volume, as one moved after it does), float32 for a body whose template is not floating point."""
+    dtype = getattr(body.v_template, "dtype", None)
+    return dtype if dtype is not None and dtype.is_floating_point else None
 
 
 def _apply_with_volume(body, fn, *args, **kwargs):

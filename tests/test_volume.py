@@ -100,6 +100,24 @@ def test_sparse_equals_dense(vbody, tiny_config):
     assert torch.allclose(parts[0], parts[1], atol=1e-5)
 
 
+@pytest.mark.parametrize("model", ["volsmpl", "coap", "mesh"])
+def test_attach_to_a_float64_body_gives_a_float64_volume(model):
+    """A body moved by .double() before attach_volume got a float32 volume (only the device followed the body),
+    so every query of its float64 outputs was refused; the volume now takes the body's dtype (as after
+    body.double() on an attached body) and answers the float32 values in float64."""
+    ref_body = volsmpl.create_body()
+    ref_vol = volsmpl.attach_volume(ref_body, model=model)
+    b64 = volsmpl.create_body().double()
+    vol = volsmpl.attach_volume(b64, model=model)
+    assert all(t.dtype == torch.float64 for t in list(vol.parameters()) + list(vol.buffers()) if t.is_floating_point())
+    p = random_pose(2, scale=0.2)
+    out = ref_body(**p)
+    pts = _near_points(out, 200)
+    ref = ref_vol.query(out, pts)
+    got = vol.query(b64(**{k: v.double() for k, v in p.items()}), pts.double())
+    assert got.dtype == torch.float64 and torch.allclose(got.float(), ref, atol=1e-4)
+
+
 def test_sparse_equals_dense_float64(tiny_config):
     """In float64 the sparse (lean) and dense paths agree to 1e-5 in values and in all gradients."""
     b = volsmpl.create_body().to(torch.float64)
