@@ -263,8 +263,9 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
     if init is not None and ck is None:
         state, cfg_dict, meta = load_checkpoint(init, expected_fingerprint=volume.fingerprint)
         if cfg_dict != cfg.model.to_dict():
-            raise ValueError(f"{init} holds model config {cfg_dict}, not {cfg.model.to_dict()}; pass its training "
-                             f"config (saved in its JSON under meta.training.train_config) with --config.")
+            raise ValueError(f"{init} holds model config {cfg_dict}, not the training config's {cfg.model.to_dict()}; "
+                             f"pass a --config whose 'model' is the checkpoint's (its JSON's meta.training.train_config, "
+                             f"which a plain --init uses).")
         volume.net.load_state_dict(state)
         start = int(meta.get("training", {}).get("step", 0))
         spent = float(meta.get("training", {}).get("train_seconds", 0.0))
@@ -370,6 +371,33 @@ def add_parser(sub):
     return p
 
 
+def _checkpoint_train_config(path) -> dict:
+    """The training config recorded in a model checkpoint's JSON (meta.training.train_config), {} when it has none;
+    the checkpoint is named with or without suffix and checked as `load_checkpoint` checks it."""
+    _, _, meta = load_checkpoint(path, weights=False)
+    training = meta.get("training")
+    tc = training.get("train_config") if isinstance(training, dict) else None
+    return dict(tc) if isinstance(tc, dict) else {}
+
+
+def _start_config(args) -> dict:
+    """The config fields a `volsmpl train` starts from, before --set: the --config file; on --resume the run's own
+    (its config.json, or the latest checkpoint's training config in a folder holding only copied checkpoint
+    folders); with --init the init checkpoint's training config; else {} (the defaults)."""
+    if args.config:
+        return read_config_file(args.config)
+    out = Path(args.out)
+    if args.resume:
+        if (out / "config.json").exists():
+            return read_config_file(out / "config.json", "the run's config")
+        ck = latest_checkpoint(out)
+        if ck is not None:
+            return _checkpoint_train_config(ck / "model")
+    if args.init:
+        return _checkpoint_train_config(args.init)
+    return {}
+
+
 def run(args) -> int:
     from .outputs import check_writable
     check_writable(args.out, "dir", "--out")  # before any work: a bad run folder fails in seconds
@@ -377,16 +405,9 @@ def run(args) -> int:
         raise ValueError(f"--max-steps {args.max_steps}: give a number of steps >= 0.")
     if args.max_hours is not None and not (math.isfinite(args.max_hours) and args.max_hours > 0):
         raise ValueError(f"--max-hours {args.max_hours}: give a finite number of hours > 0.")
-    d = {}
-    if args.config:
-        d = read_config_file(args.config)
-    elif args.resume and (Path(args.out) / "config.json").exists():
-        d = read_config_file(Path(args.out) / "config.json", "the run's config")
+    d = _start_config(args)
     d.update(parse_set(args.set))
     cfg = TrainConfig.from_dict(d)
-    if args.init and not args.config and not args.set:
-        meta = json.loads(Path(str(args.init).removesuffix(".safetensors") + ".json").read_text())["meta"]
-        cfg = TrainConfig.from_dict(meta["training"]["train_config"])
     summary = train(cfg, args.out, resume=args.resume, max_steps=args.max_steps, device=args.device, init=args.init,
                     max_seconds=None if args.max_hours is None else args.max_hours * 3600)
     print(f"done: step {summary.get('step')} loss {summary.get('loss')}")

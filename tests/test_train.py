@@ -398,3 +398,30 @@ def test_cli_set_takes_string_values_and_config_errors_name_the_file(tmp_path, c
         assert main(["train", "--out", str(tmp_path / "r2"), "--max-steps", "0", *argv]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and all(w in err for w in words), err
+
+
+def test_cli_resume_and_init_take_the_checkpoints_training_config(tmp_path, capsys):
+    """A run folder holding only a copied checkpoint folder (checkpoints/README.md: mkdir, cp -r ckpt-N, echo > latest)
+    resumed with the default config, not the run's (refused here only because the model config differed; with the
+    default network the run went on with batch 8, 450k steps, ...); `--init CKPT.json` looked for CKPT.json.json;
+    `--init CKPT --set k=v` trained on the defaults, not on the checkpoint's config. All three now start from the
+    checkpoint's recorded training config (meta.training.train_config), --set on top."""
+    import shutil
+
+    from volsmpl.cli import main
+
+    cfg = tiny_cfg()
+    train(cfg, tmp_path / "a", max_steps=2, quiet=True)
+    b = tmp_path / "b"
+    b.mkdir()
+    shutil.copytree(tmp_path / "a" / "ckpt-00000002", b / "ckpt-00000002")
+    (b / "latest").write_text("ckpt-00000002")
+    assert main(["train", "--resume", "--out", str(b), "--max-steps", "1", "--device", "cpu",
+                 "--set", "num_threads=1"]) == 0, capsys.readouterr().err
+    assert json.loads((b / "config.json").read_text()) == {**cfg.to_dict(), "num_threads": 1}
+    assert (b / "latest").read_text() == "ckpt-00000003"
+    c = tmp_path / "c"
+    assert main(["train", "--init", str(tmp_path / "a" / "ckpt-00000002" / "model.json"), "--out", str(c),
+                 "--max-steps", "1", "--device", "cpu", "--set", "lr=5e-5"]) == 0, capsys.readouterr().err
+    assert json.loads((c / "config.json").read_text()) == {**cfg.to_dict(), "lr": 5e-5}
+    assert (c / "latest").read_text() == "ckpt-00000003"
