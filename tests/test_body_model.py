@@ -88,6 +88,20 @@ def test_bad_inputs(body, kwargs, msg):
         body(**kwargs)
 
 
+@pytest.mark.parametrize("kwargs, exc, msg", [
+    (dict(num_betas=10.0), TypeError, "num_betas must be an int, got float 10.0"),
+    (dict(batch_size=2.0), TypeError, "batch_size must be an int, got float 2.0"),
+    (dict(num_betas="10"), TypeError, "num_betas must be an int, got str"),
+    (dict(batch_size=0), ValueError, "batch_size=0"),
+])
+def test_create_body_options_checked(kwargs, exc, msg):
+    """create_body(num_betas=10.0) failed with 'slice indices must be integers', batch_size=2.0 only at forward
+    with 'zeros() takes 1 positional argument but 2 were given'; both are refused at creation in one line."""
+    with pytest.raises(exc, match=msg) as e:
+        volsmpl.create_body(**kwargs)
+    assert "\n" not in str(e.value)
+
+
 def test_num_betas_bounds():
     with pytest.raises(ValueError, match="shape components"):
         Body(DEFAULT_BODY_FILE, num_betas=10_000)

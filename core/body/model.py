@@ -6,6 +6,7 @@ volsmpl accepts either. The default body is exported from Anny (see `volsmpl.bod
 from __future__ import annotations
 
 import json
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -111,13 +112,19 @@ class Body(torch.nn.Module):
 
     def __init__(self, model_path: str | Path = DEFAULT_BODY_FILE, num_betas: int = 10, batch_size: int = 1):
         super().__init__()
+        for name, value in (("num_betas", num_betas), ("batch_size", batch_size)):
+            if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+                raise TypeError(f"{name} must be an int, got {type(value).__name__} {value!r}; pass e.g. "
+                                f"{name}={10 if name == 'num_betas' else 1}.")
+        if batch_size < 1:
+            raise ValueError(f"batch_size={batch_size}: the batch size of parameters left out of forward() must be >= 1.")
         arrays = load_smpl_arrays(model_path)
         self.model_path = str(model_path)
         nb_avail = arrays["shapedirs"].shape[-1]
         if not 0 <= num_betas <= nb_avail:
             raise ValueError(f"num_betas={num_betas} but {model_path} has {nb_avail} shape components; use 0..{nb_avail}.")
-        self.num_betas = num_betas
-        self.batch_size = batch_size
+        self.num_betas, self.num_betas_available = int(num_betas), int(nb_avail)
+        self.batch_size = int(batch_size)
         self.fingerprint = body_fingerprint(arrays)
         parents = arrays["kintree_table"][0].astype(np.int64)
         parents[0] = -1  # SMPL stores 4294967295
