@@ -269,6 +269,9 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
         volume.net.load_state_dict(state)
         start = int(meta.get("training", {}).get("step", 0))
         spent = float(meta.get("training", {}).get("train_seconds", 0.0))
+        if start >= cfg.steps:  # a new run that would train nothing: its schedule ended at or before that step
+            raise ValueError(f"{init} is at step {start} and the training config ends at steps={cfg.steps}: nothing to "
+                             f"train; give the phase its end, e.g. --set steps={start + 1000} anneal_start={start}.")
     if ck is not None:
         saved = read_training_state(ck, volume, cfg)
         start, spent = saved["step"], saved["train_seconds"]
@@ -353,7 +356,8 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
             print()
     if world > 1:
         dist.barrier()
-    return {**last, "losses": losses, "sec_per_step": (time.time() - t0) / max(1, end - start)}
+    return {**last, "losses": losses, "sec_per_step": (time.time() - t0) / max(1, end - start), "start_step": start,
+            "steps": cfg.steps}
 
 
 # ---------------------------------------------------------------------- CLI
@@ -410,5 +414,12 @@ def run(args) -> int:
     cfg = TrainConfig.from_dict(d)
     summary = train(cfg, args.out, resume=args.resume, max_steps=args.max_steps, device=args.device, init=args.init,
                     max_seconds=None if args.max_hours is None else args.max_hours * 3600)
-    print(f"done: step {summary.get('step')} loss {summary.get('loss')}")
+    if "step" in summary:
+        print(f"done: step {summary['step']} loss {summary['loss']}")
+    elif summary["start_step"] >= summary["steps"]:
+        print(f"nothing to train: {args.out} is at step {summary['start_step']}, the end of its schedule "
+              f"(steps={summary['steps']}); to go on, give it a later end: --resume --set steps=N")
+    else:
+        print(f"nothing trained: {args.out} stays at step {summary['start_step']} (--max-steps 0 or the --max-hours "
+              f"budget)")
     return 0

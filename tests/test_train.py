@@ -425,3 +425,21 @@ def test_cli_resume_and_init_take_the_checkpoints_training_config(tmp_path, caps
                  "--max-steps", "1", "--device", "cpu", "--set", "lr=5e-5"]) == 0, capsys.readouterr().err
     assert json.loads((c / "config.json").read_text()) == {**cfg.to_dict(), "lr": 5e-5}
     assert (c / "latest").read_text() == "ckpt-00000003"
+
+
+def test_nothing_to_train_is_said_not_done_step_none(tmp_path, capsys):
+    """--init from a checkpoint at the end of its schedule (e.g. the shipped COAP, step 5,735 of 5,735) trained nothing
+    and printed 'done: step None loss None' (exit 0); so did --resume of a finished run. The first is refused in one
+    line naming the fix, the second says where the run stands."""
+    from volsmpl.cli import main
+
+    cfg = dataclasses.replace(tiny_cfg(), steps=2)
+    train(cfg, tmp_path / "a", quiet=True)
+    with pytest.raises(ValueError, match="is at step 2 and the training config ends at steps=2: nothing to train"):
+        train(cfg, tmp_path / "c", init=tmp_path / "a" / "ckpt-00000002" / "model", quiet=True)
+    assert main(["train", "--init", str(tmp_path / "a" / "ckpt-00000002" / "model"), "--out", str(tmp_path / "d"),
+                 "--device", "cpu"]) == 2
+    assert "--set steps=" in capsys.readouterr().err
+    assert main(["train", "--resume", "--out", str(tmp_path / "a"), "--device", "cpu"]) == 0
+    out = capsys.readouterr().out
+    assert "None" not in out and "nothing to train" in out and "step 2" in out
