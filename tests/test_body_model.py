@@ -88,6 +88,31 @@ def test_bad_inputs(body, kwargs, msg):
         body(**kwargs)
 
 
+def test_unbatched_parameter_is_the_one_named(body):
+    """A 1-D betas (10,) beside a (2, 69) body_pose was named wrongly: 'body_pose has batch size 2 but other inputs
+    have 1' (the batch was read from the first parameter given, even a 1-D one). The batch is now that of the
+    first (B, width) parameter, so the message names betas; a 1-D parameter alone is still a batch of 1."""
+    with pytest.raises(ValueError, match=r"^betas has batch size 1 but other inputs have 2"):
+        body(betas=torch.zeros(10), body_pose=torch.zeros(2, 69))
+    with pytest.raises(ValueError, match=r"^global_orient has batch size 1 but other inputs have 2"):
+        body(global_orient=torch.zeros(3), body_pose=torch.zeros(2, 69), transl=torch.zeros(2, 3))
+    assert torch.equal(body(betas=torch.zeros(10), body_pose=torch.zeros(1, 69)).vertices, body().vertices)
+
+
+def test_betas_of_another_width_name_num_betas(body):
+    """betas with more or fewer columns than the body's num_betas said only 'expected (B, 10)'; the message now
+    names num_betas and the fix (create_body(num_betas=n) when the file has n components)."""
+    with pytest.raises(ValueError, match=r"betas has 16 columns but the body was created with num_betas=10; "
+                                         r"create the body with volsmpl.create_body\(num_betas=16\)"):
+        body(betas=torch.zeros(1, 16))
+    with pytest.raises(ValueError, match=r"num_betas=10; create the body with volsmpl.create_body\(num_betas=5\)"):
+        body(betas=torch.zeros(1, 5))
+    with pytest.raises(ValueError, match=r"has 16 shape components: pass at most 16 columns"):
+        body(betas=torch.zeros(1, 300))
+    b16 = volsmpl.create_body(num_betas=16)
+    assert b16(betas=torch.zeros(1, 16)).vertices.shape == (1, 13348, 3)
+
+
 @pytest.mark.parametrize("kwargs, exc, msg", [
     (dict(num_betas=10.0), TypeError, "num_betas must be an int, got float 10.0"),
     (dict(batch_size=2.0), TypeError, "batch_size must be an int, got float 2.0"),

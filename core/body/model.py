@@ -155,6 +155,12 @@ class Body(torch.nn.Module):
             raise TypeError(f"{name} must be a torch.Tensor of shape (B, {width}), got {type(value).__name__}")
         if value.ndim == 1 and value.shape[0] == width:
             value = value[None]
+        if name == "betas" and value.ndim == 2 and value.shape[1] != width:
+            n, avail = value.shape[1], self.num_betas_available
+            fix = (f"create the body with volsmpl.create_body(num_betas={n}) (this file has {avail} components)"
+                   if n <= avail else f"this file has {avail} shape components: pass at most {avail} columns")
+            raise ValueError(f"betas has {n} columns but the body was created with num_betas={width}; {fix}, or pass "
+                             f"betas of shape (B, {width}).")
         if value.ndim != 2 or value.shape[1] != width:
             raise ValueError(f"{name} has shape {tuple(value.shape)}, expected (B, {width})"
                              + (f"; reshape (B, {width // 3}, 3) axis-angle with .reshape(B, -1)" if width % 3 == 0 and name != "betas" else ""))
@@ -180,7 +186,8 @@ class Body(torch.nn.Module):
         if unknown:
             raise TypeError(f"Body.forward got unexpected arguments {unknown}; it takes betas, global_orient, body_pose, transl.")
         given = [v for v in (betas, global_orient, body_pose, transl) if torch.is_tensor(v)]
-        B = given[0].shape[0] if given and given[0].ndim == 2 else (1 if given else self.batch_size)
+        batched = [v for v in given if v.ndim == 2]  # the batch of the first (B, width) one: a 1-D one is a batch of 1
+        B = batched[0].shape[0] if batched else (1 if given else self.batch_size)
         if B < 1:
             params = dict(betas=betas, global_orient=global_orient, body_pose=body_pose, transl=transl)
             empty = [f"{k} has shape {tuple(v.shape)}" for k, v in params.items() if torch.is_tensor(v) and v.shape[:1] == (0,)]
