@@ -134,6 +134,26 @@ def checkpoint_model(path: str | os.PathLike) -> str:
     return kind_of_config(cfg)
 
 
+def _folder_hint(path) -> Optional[str]:
+    """The fix when `path` names a folder rather than a checkpoint: a training-state folder (ckpt-<step>/, whose
+    model is <folder>/model) or a run folder (its latest training state's model); None for anything else."""
+    p = os.fspath(path)
+    if not os.path.isdir(p):
+        return None
+    d = p.rstrip("/\\") or p
+    if os.path.isfile(os.path.join(d, "model.safetensors")):
+        return (f"{p} is a training-state folder, not a checkpoint; its model checkpoint is "
+                f"{os.path.join(d, 'model')}.")
+    latest = os.path.join(d, "latest")
+    if os.path.isfile(latest):
+        with open(latest) as f:
+            name = f.read().strip()
+        return (f"{p} is a training run folder, not a checkpoint; its latest model checkpoint is "
+                f"{os.path.join(d, name, 'model')}.")
+    return (f"{p} is a folder, not a checkpoint; a checkpoint is the pair <name>.safetensors + <name>.json: give "
+            f"<folder>/<name>.")
+
+
 def load_checkpoint(path: str | os.PathLike, expected_fingerprint: Optional[str] = None,
                     map_location: str | torch.device = "cpu", weights: bool = True
                     ) -> Tuple[Optional[Dict[str, torch.Tensor]], Dict[str, Any], Dict[str, Any]]:
@@ -156,6 +176,9 @@ def load_checkpoint(path: str | os.PathLike, expected_fingerprint: Optional[str]
     st_path, js_path = checkpoint_paths(path)
     for f in (js_path, st_path):
         if not os.path.isfile(f):
+            hint = _folder_hint(path)
+            if hint:
+                raise CheckpointError(hint)
             raise CheckpointError(f"checkpoint file not found: {f}. A checkpoint is the pair "
                                   f"{os.path.basename(st_path)} + {os.path.basename(js_path)}; {_HOWTO}.")
     try:

@@ -59,6 +59,27 @@ def test_missing_file(tmp_path):
         load_checkpoint(tmp_path / "model")
 
 
+def test_folder_given_as_checkpoint_names_the_model_inside(tmp_path):
+    """`volsmpl eval --checkpoint runs/x/ckpt-00000200` (a training-state folder) or `--init runs/x` (a run folder)
+    said 'checkpoint file not found: runs/x/ckpt-00000200.json' (or '.../.json' with a trailing slash); the message
+    now names the model checkpoint inside. A checkpoint beside a folder of its name still loads."""
+    ck = tmp_path / "run" / "ckpt-00000002"
+    ck.mkdir(parents=True)
+    _save(ck)
+    (tmp_path / "run" / "latest").write_text("ckpt-00000002\n")
+    for given in (str(ck), str(ck) + "/"):
+        with pytest.raises(CheckpointError, match="training-state folder") as e:
+            load_checkpoint(given)
+        assert str(ck / "model") + "." in str(e.value)
+    with pytest.raises(CheckpointError, match="run folder") as e:
+        load_checkpoint(tmp_path / "run")
+    assert str(ck / "model") + "." in str(e.value)
+    with pytest.raises(CheckpointError, match="is a folder, not a checkpoint"):
+        load_checkpoint(tmp_path)
+    (ck / "model").mkdir()  # a folder beside the pair of the same name: the pair is the checkpoint
+    assert load_checkpoint(ck / "model")[0] is not None
+
+
 def test_corrupt_safetensors(tmp_path):
     _save(tmp_path)
     p = tmp_path / "model.safetensors"
