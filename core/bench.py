@@ -181,6 +181,18 @@ def checkpoint_for(model: str, cfg: BenchConfig) -> Optional[str]:
     return None
 
 
+def check_given_checkpoints(cfg: BenchConfig) -> None:
+    """Every checkpoint given for a base model exists and holds that model (`checkpoint_model`: the JSON's
+    config); ValueError / FileNotFoundError / CheckpointError in one line naming the option and the fix."""
+    from .checkpoint import checkpoint_model
+
+    for base, given in sorted(cfg.checkpoints.items()):
+        held = checkpoint_model(checkpoint_for(base, cfg))
+        if held != base:
+            raise ValueError(f"--checkpoint-{base} {given} holds a {held} model, not {base}; pass it as "
+                             f"--checkpoint-{held}.")
+
+
 # ---------------------------------------------------------------------------------------------- measurements
 def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optional[str]) -> dict:
     """Time, memory, parameters and decoder work of one benchmark model at one batch size (isolated process)."""
@@ -291,6 +303,7 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
         raise RuntimeError("device='cuda' but torch sees no CUDA GPU; use --device cpu.")
     if cfg.threads is not None:
         torch.set_num_threads(cfg.threads)
+    check_given_checkpoints(cfg)  # before any work: a wrong file fails in seconds, not after the other models
     body = create_body()
     result = {"meta": machine_info(cfg.device, cfg.threads), "config": dataclasses.asdict(cfg), "paper": PAPER,
               "notes": [], "models": {}}

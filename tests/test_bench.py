@@ -133,6 +133,28 @@ def test_missing_checkpoint_is_a_clear_cli_error(tmp_path, capsys):
     assert "not found" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("option, model, asset", [("--checkpoint-coap", "coap-sparse", "volsmpl"),
+                                                  ("--checkpoint-volsmpl", "volsmpl", "coap")])
+def test_checkpoint_of_the_other_model_is_refused_before_any_work(monkeypatch, capsys, option, model, asset):
+    """--checkpoint-coap core/assets/volsmpl_anny ran the matmul timing and every model before it, then died in the
+    coap worker with its traceback in the message and the advice 'call attach_volume(..., model=...)'. It is now
+    refused before any work, naming the option to use."""
+    from volsmpl import bench
+    from volsmpl.models import model_kind
+
+    def no_work(*a, **k):
+        raise AssertionError("the benchmark began before the checkpoints were checked")
+
+    monkeypatch.setattr(bench, "matmul_rate", no_work)
+    monkeypatch.setattr(bench, "bench_model", no_work)
+    path = str(model_kind(asset).default_checkpoint)
+    rc = main(["bench", "--models", model, option, path, "--quick", "--points", "100", "--batch", "1",
+               "--repeats", "1", "--matmul-size", "64", "--no-bodybody"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1, err
+    assert f"{option} {path} holds a {asset} model" in err and f"--checkpoint-{asset}" in err
+
+
 def test_budget_rules():
     assert fit_budget(2, 5, 0.1, 120.0) == (2, 5)  # fits: unchanged
     assert fit_budget(2, 5, 10.0, 120.0) == (0, 5)  # slow: no warm-up, 2 x 5 x 10 s <= 120 s
