@@ -162,6 +162,34 @@ def test_cli_without_checkpoint_stops_with_attach_volume_message(tmp_path, capsy
     assert "no trained coap checkpoint ships for this body" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--model", "mesh", "--cases", ","], ["--cases ','", "names no case"]),
+    (["--model", "mesh", "--cases", "deep_squat,arm_through_head,deep_squat"], ["deep_squat more than once"]),
+    (["--model", "volsmpl", "--checkpoint-coap", "{coap}", "--random-init", "--cases", "deep_squat"],
+     ["--checkpoint-coap is given", "does not run coap"]),
+    (["--model", "volsmpl", "--checkpoint-volsmpl", "{coap}", "--cases", "deep_squat"],
+     ["--checkpoint-volsmpl {coap} holds a coap model", "--checkpoint-coap"]),
+    (["--model", "volsmpl", "--checkpoint", "{coap}", "--cases", "deep_squat"], ["--model coap"]),
+    (["--model", "mesh", "--threads", "0", "--cases", "deep_squat"], ["--threads 0"]),
+])
+def test_cli_case_and_checkpoint_mistakes_stop_before_any_work(tmp_path, capsys, monkeypatch, argv, words):
+    """--cases ',' ran all 17 cases; a case named twice ran twice and counted twice in the summary; --checkpoint-coap
+    with --model volsmpl was ignored; a COAP checkpoint given for volsmpl ended in attach_volume's Python advice;
+    --threads 0 was ignored. Each is now one line before any repair."""
+    from volsmpl.apps.selfpen import cli as scli
+    from volsmpl.models import model_kind
+
+    def no_work(*a, **k):
+        raise AssertionError("a case was repaired before the arguments were checked")
+
+    monkeypatch.setattr(scli, "repair_case", no_work)
+    coap = str(model_kind("coap").default_checkpoint)
+    argv = [a.format(coap=coap) for a in argv]
+    assert cli_main(["selfpen", *argv, "--render", "0", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and all(w.format(coap=coap) in err for w in words), err
+
+
 @functools.lru_cache(maxsize=1)
 def _default_partition():
     return volsmpl.Partition(volsmpl.create_body())

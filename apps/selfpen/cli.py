@@ -68,8 +68,17 @@ def add_parser(sub):
 
 
 def _checkpoints(args, models: list[str]) -> dict:
+    """model -> checkpoint path or None (shipped); each given checkpoint is checked to exist and to hold its model,
+    and one given for a model that does not run is refused (it would be ignored)."""
+    from volsmpl.checkpoint import checkpoint_model
+
     ck = {m: None for m in models}
-    ck.update({m: c for m, c in (("volsmpl", args.checkpoint_volsmpl), ("coap", args.checkpoint_coap)) if c and m in ck})
+    for m, c in (("volsmpl", args.checkpoint_volsmpl), ("coap", args.checkpoint_coap)):
+        if c and m not in ck:
+            raise ValueError(f"--checkpoint-{m} is given but --model {','.join(models)} does not run {m}: add it to "
+                             f"--model or drop the option.")
+        if c:
+            ck[m] = c
     if args.checkpoint is not None:
         if len(models) != 1:
             raise ValueError("--checkpoint needs exactly one --model; use --checkpoint-volsmpl / --checkpoint-coap for several")
@@ -79,7 +88,28 @@ def _checkpoints(args, models: list[str]) -> dict:
             raise ValueError(f"model '{m}' has no weights: drop its checkpoint")
     if args.random_init and any(ck.values()):
         raise ValueError("--random-init and a checkpoint exclude each other")
+    for m, c in ck.items():
+        held = None if c is None else checkpoint_model(c)
+        if held is not None and held != m:
+            option = "--checkpoint" if c == args.checkpoint else f"--checkpoint-{m}"
+            raise ValueError(f"{option} {c} holds a {held} model, not {m}; give it to {held} (--model {held}, "
+                             f"--checkpoint-{held}).")
     return ck
+
+
+def _case_names(text: str) -> list[str] | None:
+    """`--cases` -> the case names in order, None for 'all'; an empty list or a name given twice (it would run twice
+    and count twice in the summary) is refused."""
+    if text.strip() == "all":
+        return None
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise ValueError(f"--cases {text!r} names no case: give comma-separated case names, or 'all'.")
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"--cases names {', '.join(twice)} more than once (it would run and count twice in the "
+                         f"summary); give each case once.")
+    return names
 
 
 def render_case(path, faces: np.ndarray, results: dict, size: int = 320) -> None:
@@ -115,10 +145,11 @@ def run(args) -> int:
                                device=args.device, **given)
     if cfg.device == "cuda" and not torch.cuda.is_available():
         raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
-    if args.threads:
+    if args.threads is not None:
+        if args.threads < 1:
+            raise ValueError(f"--threads {args.threads}: give a positive number of CPU threads.")
         torch.set_num_threads(args.threads)
-    names = None if args.cases.strip() == "all" else [n.strip() for n in args.cases.split(",") if n.strip()]
-    cases = load_cases(args.case_file, names)
+    cases = load_cases(args.case_file, _case_names(args.cases))
     body = volsmpl.create_body().to(cfg.device)
     volumes = {}
     for m in models:  # fail early (missing checkpoint) before any work
