@@ -14,10 +14,22 @@ from .collision import reduce_penetration
 
 
 def check_output(out) -> None:
-    """A clear error unless `out` is a body forward output (vertices, joints, full_pose tensors)."""
+    """A clear error unless `out` is a body forward output: tensors vertices (B, V, 3), joints (B, J, 3) and
+    full_pose (B, J*3) (or (B, J, 3)) of the same B >= 1 bodies (shapes only: no pass over the values)."""
     for name in ("vertices", "joints", "full_pose"):
         if not torch.is_tensor(getattr(out, name, None)):
             raise TypeError(f"expected a body forward output with tensor '{name}' (call body(...) first), got {type(out).__name__}")
+    v, j, p = out.vertices, out.joints, out.full_pose
+    if v.ndim != 3 or v.shape[-1] != 3 or j.ndim != 3 or j.shape[-1] != 3 or p.ndim not in (2, 3):
+        raise ValueError(f"the body output has vertices {tuple(v.shape)}, joints {tuple(j.shape)}, full_pose "
+                         f"{tuple(p.shape)}; expected (B, V, 3), (B, J, 3), (B, J*3) as body(...) returns (one body of a "
+                         f"batch: volsmpl.body_view.select_body(out, b)).")
+    if not v.shape[0] == j.shape[0] == p.shape[0]:
+        raise ValueError(f"the body output's fields are for different numbers of bodies: vertices {tuple(v.shape)}, joints "
+                         f"{tuple(j.shape)}, full_pose {tuple(p.shape)}; give all of one batch of bodies (slice "
+                         f"them together, or volsmpl.body_view.select_body(out, b)).")
+    if v.shape[0] == 0:
+        raise ValueError("the body output holds 0 bodies; query at least one (skip the call when there is none).")
 
 
 class BodyVolume(torch.nn.Module):

@@ -334,6 +334,29 @@ def test_empty_and_bad_points(vbody):
         vol.selfpen_loss(out, tau=0.0)
 
 
+@pytest.mark.parametrize("model", ["volume", "mesh"])
+def test_output_of_unbatched_or_mixed_fields_refused(vbody, model):
+    """A hand-made output whose fields are not one batch failed deep inside ("shape '[72, -1, 3]' is invalid",
+    open3d's 'Tensor has shape {3}', 'stack expects a non-empty TensorList') or was answered silently: the mesh kind's
+    selfpen_loss gave 1 value for vertices of 2 bodies beside joints and full_pose of 1. Every entry now refuses it
+    in one line naming the shapes."""
+    from types import SimpleNamespace
+    vol = vbody.volume if model == "volume" else volsmpl.attach_volume(volsmpl.create_body(), model="mesh")
+    with torch.no_grad():
+        out = vbody(**random_pose(2))
+    pts = torch.zeros(4, 3)
+    one = SimpleNamespace(vertices=out.vertices[0], joints=out.joints[0], full_pose=out.full_pose[0])
+    mixed = SimpleNamespace(vertices=out.vertices, joints=out.joints[:1], full_pose=out.full_pose[:1])
+    empty = SimpleNamespace(vertices=out.vertices[:0], joints=out.joints[:0], full_pose=out.full_pose[:0])
+    for bad, words in ((one, r"vertices \(13348, 3\), joints \(24, 3\), full_pose \(72,\); expected \(B, V, 3\)"),
+                       (mixed, "different numbers of bodies"), (empty, "0 bodies")):
+        for call in (lambda: vol.query(bad, pts), lambda: vol.query_parts(bad, pts), lambda: vol.selfpen_loss(bad),
+                     lambda: vol.collision_loss(bad, pts)):
+            with pytest.raises(ValueError, match=words) as e:
+                call()
+            assert "\n" not in str(e.value)
+
+
 def test_query_encoded_pairs_points_with_bodies(vbody):
     """query_encoded (the apps' and training's query on an explicit encoding) takes the points as `query` does:
     (N, 3) shared by every body gives each body's dense values, (1, N, 3) for 2 bodies is refused in one line
