@@ -427,6 +427,8 @@ def run(args) -> int:
     from .outputs import check_writable, write_atomic
     if args.out:  # before the evaluation: a bad path fails in seconds, not after it
         check_writable(args.out, "file", "--out")
+    if args.cache_dir is not None and not args.no_cache:  # written after the ground truth: checked before it
+        check_writable(args.cache_dir, "dir", "--cache-dir")
     if args.checkpoint is not None and args.random_init:
         raise ValueError("--checkpoint and --random-init exclude each other; give one.")
     if args.threads is not None:

@@ -293,6 +293,28 @@ def test_cli_end_to_end(body, tiny_config, tmp_path, capsys):
     assert main(["eval", "--checkpoint", str(tmp_path / "missing"), "--n-bodies", "1"]) == 2
 
 
+@pytest.mark.parametrize("argv, words", [
+    (["--cache-dir", "{file}"], ["--cache-dir", "existing file"]),
+    (["--cache-dir", "{file}/gt"], ["--cache-dir", "is a file"]),
+])
+def test_cli_cache_dir_and_timing_checked_before_the_work(tmp_path, capsys, monkeypatch, argv, words):
+    """--cache-dir naming a file was found only after the ground truth had been computed (minutes on 64 bodies), as
+    '[Errno 17] File exists'. It stops in one line first."""
+    from volsmpl.cli import main
+
+    def no_work(*a, **k):
+        raise AssertionError("the ground truth was computed before the arguments were checked")
+
+    monkeypatch.setattr(ev, "ground_truth", no_work)
+    afile = tmp_path / "file.txt"
+    afile.write_text("x")
+    argv = [a.format(file=afile) for a in argv]
+    assert main(["eval", "--random-init", "--n-bodies", "1", "--points", "500", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and all(w in err for w in words), err
+    assert afile.read_text() == "x"
+
+
 @pytest.mark.needs_checkpoint
 def test_shipped_checkpoint_accuracy(tmp_path):
     # regression guard of the shipped asset on the first 4 validation bodies (winding-number ground truth): the bar
