@@ -429,6 +429,9 @@ def run(args) -> int:
         check_writable(args.out, "file", "--out")
     if args.cache_dir is not None and not args.no_cache:  # written after the ground truth: checked before it
         check_writable(args.cache_dir, "dir", "--cache-dir")
+    if args.timing and args.split == "self_contact":
+        raise ValueError("--timing measures validation body 0 of the standard split, which --split self_contact does "
+                         "not run: use --split standard or all with --timing.")
     if args.checkpoint is not None and args.random_init:
         raise ValueError("--checkpoint and --random-init exclude each other; give one.")
     if args.threads is not None:

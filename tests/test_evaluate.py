@@ -296,10 +296,11 @@ def test_cli_end_to_end(body, tiny_config, tmp_path, capsys):
 @pytest.mark.parametrize("argv, words", [
     (["--cache-dir", "{file}"], ["--cache-dir", "existing file"]),
     (["--cache-dir", "{file}/gt"], ["--cache-dir", "is a file"]),
+    (["--split", "self_contact", "--timing"], ["--timing", "--split standard or all"]),
 ])
 def test_cli_cache_dir_and_timing_checked_before_the_work(tmp_path, capsys, monkeypatch, argv, words):
     """--cache-dir naming a file was found only after the ground truth had been computed (minutes on 64 bodies), as
-    '[Errno 17] File exists'. It stops in one line first."""
+    '[Errno 17] File exists'; --split self_contact --timing dropped the timing silently. Both stop in one line first."""
     from volsmpl.cli import main
 
     def no_work(*a, **k):
