@@ -18,6 +18,7 @@ def check_points(points, like: torch.Tensor, finite: bool = True) -> torch.Tenso
     B = like.shape[0]
     if not torch.is_tensor(points):
         raise TypeError(f"points must be a torch.Tensor of shape (B, N, 3) or (N, 3), got {type(points).__name__}")
+    given = points  # as the caller gave them: NaN counts are of these, not of the expanded (B, N, 3)
     if points.ndim == 2 and points.shape[-1] == 3:
         points = points[None].expand(B, -1, -1)
     if points.ndim != 3 or points.shape[-1] != 3:
@@ -33,7 +34,7 @@ def check_points(points, like: torch.Tensor, finite: bool = True) -> torch.Tenso
         raise ValueError(f"points are on {points.device} but the body output is on {like.device}; move them with points.to('{like.device}').")
     if not finite:
         return points
-    bad = ~torch.isfinite(points).all(dim=-1)
+    bad = ~torch.isfinite(given).all(dim=-1)
     if bad.any():
         raise ValueError(f"points contain NaN or Inf ({int(bad.sum())} of {bad.numel()} points); remove or fix them before querying.")
     return points

@@ -316,6 +316,9 @@ def test_empty_and_bad_points(vbody):
     bad[1, 2, 0] = float("nan")
     with pytest.raises(ValueError, match="NaN or Inf"):
         vol.query(out, bad)
+    # (N, 3) points shared by the 2 bodies are counted as given (before: '2 of 10 points' for 1 of 5)
+    with pytest.raises(ValueError, match=r"NaN or Inf \(1 of 5 points\)"):
+        vol.query(out, bad[1])
     with pytest.raises(ValueError, match="shape"):
         vol.query(out, torch.zeros(2, 5, 2))
     with pytest.raises(ValueError, match="3 bodies"):
