@@ -402,6 +402,18 @@ def _start_config(args) -> dict:
     return {}
 
 
+def _say_config_changes(out: Path, cfg: TrainConfig) -> None:
+    """On --resume, name on stderr every field of `cfg` that differs from the training config recorded in the
+    checkpoint it continues (a --config or --set that changes the run is meant, but never silent)."""
+    ck = latest_checkpoint(out)
+    if ck is None:
+        return
+    saved, now = _checkpoint_train_config(ck / "model"), cfg.to_dict()
+    changed = [f"{k} {saved[k]!r} -> {now[k]!r}" for k in sorted(now) if k in saved and saved[k] != now[k]]
+    if changed:
+        print(f"note: resuming {ck.name} with a changed training config: {'; '.join(changed)}", file=sys.stderr)
+
+
 def run(args) -> int:
     from .outputs import check_writable
     check_writable(args.out, "dir", "--out")  # before any work: a bad run folder fails in seconds
@@ -412,6 +424,8 @@ def run(args) -> int:
     d = _start_config(args)
     d.update(parse_set(args.set))
     cfg = TrainConfig.from_dict(d)
+    if args.resume:
+        _say_config_changes(Path(args.out), cfg)
     summary = train(cfg, args.out, resume=args.resume, max_steps=args.max_steps, device=args.device, init=args.init,
                     max_seconds=None if args.max_hours is None else args.max_hours * 3600)
     if "step" in summary:

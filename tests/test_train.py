@@ -443,3 +443,18 @@ def test_nothing_to_train_is_said_not_done_step_none(tmp_path, capsys):
     assert main(["train", "--resume", "--out", str(tmp_path / "a"), "--device", "cpu"]) == 0
     out = capsys.readouterr().out
     assert "None" not in out and "nothing to train" in out and "step 2" in out
+
+
+def test_cli_resume_names_the_config_fields_it_changes(tmp_path, capsys):
+    """--resume with a --config or --set that differs from the checkpoint's training config continued a different run
+    without a word; the changed fields are now named on stderr (the change itself stays allowed: new phases use it)."""
+    from volsmpl.cli import main
+
+    cfg = tiny_cfg()
+    train(cfg, tmp_path / "a", max_steps=2, quiet=True)
+    assert main(["train", "--resume", "--out", str(tmp_path / "a"), "--max-steps", "1", "--device", "cpu",
+                 "--set", "lr=5e-5"]) == 0
+    err = capsys.readouterr().err
+    assert "changed training config" in err and "lr 0.0001 -> 5e-05" in err
+    assert main(["train", "--resume", "--out", str(tmp_path / "a"), "--max-steps", "1", "--device", "cpu"]) == 0
+    assert "changed" not in capsys.readouterr().err  # the run's own config (now with lr 5e-5): nothing to say
