@@ -71,6 +71,11 @@ MUTANTS = {
                                         [T + "test_volume.py::test_selfpen_rigid_code_gradient"]),
     "report_producer_app_only": ("core/report.py", "return producer_closure(section.producer + _BODY_DATA, git.root)",
                                  "return section.producer", [T + "test_report.py::test_stale_when_core_code_the_app_imports_changed"]),
+    "resume_copied_checkpoint_on_defaults": ("core/train.py", '            return _checkpoint_train_config(ck / "model")\n',
+                                             "            return {}\n",
+                                             [T + "test_train.py::test_cli_resume_and_init_take_the_checkpoints_training_config"]),
+    "float64_body_float32_volume": ("core/attach.py", "return dtype if dtype is not None and dtype.is_floating_point else None",
+                                    "return None", [T + "test_volume.py::test_attach_to_a_float64_body_gives_a_float64_volume"]),
 }
 
 
