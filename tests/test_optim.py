@@ -1,6 +1,8 @@
 """The optimisation harness (volsmpl.optim) against closed-form optima and hand-computed steps."""
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import pytest
 import torch
 
@@ -62,6 +64,29 @@ def test_patience_stops_a_flat_term_and_counts_from_the_best():
                    max_iters=100, stops=[Patience("flat", patience=4)], progress=False)
     # evaluation 0 sets the best; evaluations 1..4 bring no new low: the stop comes at evaluation 4 after 4 updates
     assert res.status == ["stalled"] and res.iterations == [4]
+
+
+def test_patience_on_a_negative_term_needs_a_real_new_low():
+    # a term that only gets worse (+1 per evaluation) from +100 or from -100, rtol 0.1: no new low, so both stall
+    # after 3 evaluations. For -100 the bar was best * (1 - rtol) = -90, above the best, so every worse value
+    # counted as a new low (the run went on to the cap of 100 updates); now the bar is best - rtol * |best|
+    for start in (100.0, -100.0):
+        calls = []
+
+        def rising(s, start=start, calls=calls):
+            calls.append(1)
+            return (s.x * 0).sum(dim=1) + start + len(calls) - 1
+
+        res = optimize({"x": torch.zeros(1, 1)}, {"t": rising}, optimizer="sgd", lr=0.01, max_iters=100,
+                       stops=[Patience("t", patience=3, rtol=0.1)], progress=False)
+        assert res.status == ["stalled"] and res.iterations == [3], (start, res.status, res.iterations)
+    rule = Patience("t", patience=2, rtol=0.5)
+    rule.reset(1, torch.device("cpu"))
+    ev = lambda v: SimpleNamespace(value=lambda name: torch.tensor([v]), device=torch.device("cpu"))  # noqa: E731
+    assert not rule.check(ev(-10.0)) and float(rule.best) == -10.0
+    assert not rule.check(ev(-14.0)) and float(rule.best) == -10.0  # not below -15: no new low
+    assert not rule.check(ev(-16.0)) and float(rule.best) == -16.0  # a new low
+    assert not rule.check(ev(-20.0)) and rule.check(ev(-23.0))      # -20, -23 not below -24: stalled
 
 
 def test_tolerance_stops_on_converged_total():

@@ -43,7 +43,8 @@ class MaxIters(StopRule):
 
 class Patience(StopRule):
     """Stop a problem whose value of `term` ('total' for the weighted sum) has found no new low for `patience`
-    evaluations; a new low must beat the best so far by the fraction `rtol` (noise of a sampled term)."""
+    evaluations; a new low must beat the best so far by the fraction `rtol` of its magnitude (noise of a sampled
+    term; negative values too: below best - rtol * |best|)."""
 
     status = "stalled"
 
@@ -60,7 +61,9 @@ class Patience(StopRule):
 
     def check(self, ev) -> torch.Tensor:
         value = ev.value(self.term).double().cpu()
-        better = value < self.best * (1.0 - self.rtol)
+        # the fraction rtol of |best| below it (best * (1 - rtol) would lie above a negative best)
+        bar = torch.where(self.best >= 0, self.best * (1.0 - self.rtol), self.best * (1.0 + self.rtol))
+        better = value < bar
         self.best = torch.where(better, value, self.best)
         self.since = torch.where(better, torch.zeros_like(self.since), self.since + 1)
         return (self.since >= self.patience).to(ev.device)
