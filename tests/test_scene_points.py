@@ -85,6 +85,32 @@ def test_torch_fps_picks_what_open3d_picks_ties_included(monkeypatch):
         farthest_point_loop(clouds[0], 3, start=len(clouds[0]))
 
 
+def test_fps_of_a_cloud_with_fewer_distinct_positions_than_n(monkeypatch):
+    """50 points at 10 distinct positions, n = 12: open3d returned only 10 indices (it picks its last point again
+    once all are at distance 0 and drops the repeats) and the torch loop returned index 0 three times. Now both
+    return 12 distinct indices: all 10 positions, then the first duplicates not yet picked (input order)."""
+    import builtins
+    rng = np.random.default_rng(3)
+    p = np.repeat(rng.random((10, 3)), 5, axis=0)[rng.permutation(50)]
+    for seed in (None, 7):
+        start = 0 if seed is None else int(np.random.default_rng(seed).integers(50))
+        idx = farthest_point_sample(p, 12, seed=seed)
+        assert len(idx) == 12 and len(np.unique(idx)) == 12 and len(np.unique(p[idx], axis=0)) == 10, idx
+        assert np.array_equal(farthest_point_loop(p, 12, start), idx)
+        assert np.array_equal(idx, np.sort(idx)) and start in idx
+        assert len(subsample(p, 12, seed=seed, method="fps")) == 12
+    real_import = builtins.__import__
+
+    def no_open3d(name, *args, **kw):
+        if name == "open3d":
+            raise ImportError("No module named 'open3d'")
+        return real_import(name, *args, **kw)
+
+    expected = farthest_point_sample(p, 12, seed=7)
+    monkeypatch.setattr(builtins, "__import__", no_open3d)
+    assert np.array_equal(farthest_point_sample(p, 12, seed=7), expected)  # through the fallback
+
+
 def test_fps_errors():
     with pytest.raises(ValueError, match="cannot pick"):
         farthest_point_sample(np.zeros((5, 3)), 6)

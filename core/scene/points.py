@@ -80,8 +80,9 @@ def sample_surface(mesh: trimesh.Trimesh, n: int, seed: int | None = 0, faces=No
 
 
 def farthest_point_sample(points, n: int, seed: int | None = None) -> np.ndarray:
-    """Indices of n points picked by farthest-point sampling (open3d; its loop in torch without open3d), sorted
-    ascending.
+    """Indices of n distinct points picked by farthest-point sampling (open3d; its loop in torch without open3d),
+    sorted ascending. A cloud with fewer than n distinct positions (duplicated points) gets all of them and then
+    the first duplicates not yet picked (each at distance 0 from the kept set).
 
     Args:
         points: (N, 3) array or tensor, N >= n.
@@ -107,13 +108,21 @@ def farthest_point_sample(points, n: int, seed: int | None = None) -> np.ndarray
     tag[:, 0] = np.arange(len(p))
     pcd.normals = o3d.utility.Vector3dVector(tag)
     out = pcd.farthest_point_down_sample(n, start)
-    return np.asarray(out.normals)[:, 0].round().astype(np.int64)
+    idx = np.asarray(out.normals)[:, 0].round().astype(np.int64)
+    if len(idx) < n:
+        # fewer than n distinct positions (duplicated points): once every point is at distance 0 from the kept
+        # set, open3d picks its last index again and drops the repeats. Every remaining point is then equally
+        # far: keep the first unpicked ones in input order, as farthest_point_loop does, so n distinct indices
+        rest = np.setdiff1d(np.arange(len(p)), idx)[: n - len(idx)]
+        idx = np.sort(np.concatenate([idx, rest]))
+    return idx
 
 
 def farthest_point_loop(points, n: int, start: int = 0, device=None) -> np.ndarray:
     """Farthest-point sampling as open3d does it, in torch: from `start`, repeatedly keep the point whose squared
-    distance (float64, summed x + y + z in that order) to the kept set is largest, the first such on ties. Used by
-    `farthest_point_sample` where open3d does not import.
+    distance (float64, summed x + y + z in that order) to the kept set is largest, the first such on ties, never a
+    point already kept (a cloud with fewer than n distinct positions: the first unpicked duplicates once all are
+    at distance 0). Used by `farthest_point_sample` where open3d does not import.
 
     Shape: (N, 3) -> (n,) int64 indices, ascending.
 
@@ -135,6 +144,7 @@ def farthest_point_loop(points, n: int, start: int = 0, device=None) -> np.ndarr
         d2 = d2 + d[:, 1] * d[:, 1]
         d2 = d2 + d[:, 2] * d[:, 2]
         torch.minimum(dist, d2, out=dist)
+        dist[i] = -1.0  # never picked twice: when every point is at distance 0 (duplicates), the first unpicked
         i = torch.argmax(dist)
     return picked.sort().values.cpu().numpy()
 
