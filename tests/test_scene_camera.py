@@ -111,3 +111,22 @@ def test_batch_broadcast_and_errors():
         project(p3, two)
     with pytest.raises(ValueError, match=r"\(B, N, 3\)"):
         project(torch.rand(4, 3), one)
+
+
+def test_one_eye_for_several_targets_and_mismatched_counts():
+    """look_at / make_camera take eye and target as (3,) or (B, 3): one eye with two targets stopped in a torch
+    broadcasting error ('The expanded size of the tensor (1) must match ...'); now two cameras, each the one
+    made alone, and 2 eyes with 3 targets are refused in one line."""
+    eye, targets = [0.5, 1.6, 2.0], [[0.0, 1.0, 0.0], [1.0, 0.8, -0.5]]
+    E = look_at(eye, targets)
+    assert E.shape == (2, 4, 4)
+    for b in range(2):
+        assert torch.allclose(E[b], look_at(eye, targets[b])[0])
+    cam = make_camera(eye, targets, (480, 640), 60.0)
+    pts = np.random.default_rng(1).uniform([-1, 0, -1], [1, 2, 1], (20, 3))
+    uv, depth, _ = project(torch.as_tensor(pts, dtype=torch.float32)[None], cam)
+    for b in range(2):
+        ref_uv, ref_d = _manual(pts, eye, targets[b], 480, 640, 60.0)
+        assert np.allclose(uv[b].numpy(), ref_uv, atol=1e-2) and np.allclose(depth[b].numpy(), ref_d, atol=1e-5)
+    with pytest.raises(ValueError, match="eye has 2 positions and target 3"):
+        look_at([eye, eye], targets + [[0.0, 0.5, 0.0]])

@@ -81,6 +81,10 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> torch.Tensor:
     eye = _vec3(eye, "eye")
     target = _vec3(target, "target", dtype=eye.dtype, device=eye.device)
     up = _vec3(up, "up", dtype=eye.dtype, device=eye.device)
+    b, c = eye.shape[0], target.shape[0]
+    if b != c and 1 not in (b, c):
+        raise ValueError(f"eye has {b} positions and target {c}; pass one or the same number of each.")
+    eye, target = eye.expand(max(b, c), 3), target.expand(max(b, c), 3)  # one eye for B targets, or B eyes for one
     fwd = target - eye
     dist = fwd.norm(dim=-1, keepdim=True)
     if (dist < 1e-9).any():
