@@ -46,6 +46,20 @@ def test_sample_surface_subset_and_errors():
         sample_surface(box, 0)
 
 
+def test_sample_surface_refuses_face_indices_outside_the_mesh():
+    """faces=[0, 1, 12, -1] on the 12-face box sampled faces 0 and 1 only (12 and -1 silently dropped), and
+    faces=[0.5, 1.7] said 'zero total area'; both now stop in one line naming the problem."""
+    box = trimesh.creation.box()
+    with pytest.raises(ValueError, match=r"face indices must be in 0\.\.11 \(the mesh has 12 faces\), got -1\.\.12"):
+        sample_surface(box, 10, faces=[0, 1, 12, -1])
+    with pytest.raises(ValueError, match="integer face indices or a boolean mask"):
+        sample_surface(box, 10, faces=np.array([0.5, 1.7]))
+    _, _, f = sample_surface(box, 200, seed=0, faces=np.array([0, 11]), return_faces=True)  # valid: unchanged
+    assert set(np.unique(f)) == {0, 11}
+    with pytest.raises(ValueError, match="zero total area"):
+        sample_surface(box, 10, faces=[])
+
+
 def test_fps_matches_reference_and_spreads():
     p = np.random.default_rng(0).random((3000, 3))
     idx = farthest_point_sample(p, 200)  # start index 0

@@ -68,6 +68,12 @@ def sample_surface(mesh: trimesh.Trimesh, n: int, seed: int | None = 0, faces=No
     weight = mesh.area_faces.copy()
     if faces is not None:
         sel = np.asarray(faces)
+        if sel.dtype != bool and sel.size:
+            if not np.issubdtype(sel.dtype, np.integer):
+                raise ValueError(f"faces must be integer face indices or a boolean mask, got {sel.dtype} values.")
+            if sel.min() < 0 or sel.max() >= len(weight):
+                raise ValueError(f"face indices must be in 0..{len(weight) - 1} (the mesh has {len(weight)} faces), "
+                                 f"got {int(sel.min())}..{int(sel.max())}.")
         mask = sel if sel.dtype == bool else np.isin(np.arange(len(weight)), sel)
         if mask.shape != weight.shape:
             raise ValueError(f"faces as a mask must have one entry per face ({len(weight)}), got {mask.shape}.")
