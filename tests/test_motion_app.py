@@ -331,3 +331,29 @@ def test_tuned_protocol_runs_the_sweep_on_tuning_rooms_only(tmp_path, capsys):
     assert d["summary"]["coap_w0.1"]["split"] == "tune"
     assert main(["motion", "--model", "volsmpl", "--scenes", "1", "--protocol", "tuned", "--out", str(out)]) == 2
     assert "--scenes 2 or more" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_resume_recomputes_a_sequence_made_with_another_body(tmp_path, monkeypatch):
+    """The body (the walking model's and the exact 'mesh' kind's) was not in a sequence's key: a mesh-kind record
+    walked with another body was served by --resume. Now the body's fingerprint is part of the key."""
+    import volsmpl
+    from volsmpl.cli import main
+    out = tmp_path / "motion"
+    argv = ["motion", "--model", "mesh", "--scenes", "1", "--sequences", "1", "--frames", "10", "--iters", "1",
+            "--cost-frames", "1", "--cost-repeats", "1", "--render", "0", "--out", str(out), "--resume"]
+    assert main(argv) == 0
+    (case,) = (out / "cases").glob("*.json")
+    first = case.read_text()
+    create = volsmpl.create_body
+
+    def taller_body(*a, **kw):  # another body: 5 % taller, its own fingerprint
+        body = create(*a, **kw)
+        with torch.no_grad():
+            body.v_template.mul_(1.05)
+        body.fingerprint = "another-body"
+        return body
+
+    monkeypatch.setattr(volsmpl, "create_body", taller_body)
+    assert main(argv) == 0
+    assert case.read_text() != first  # recomputed, not reused

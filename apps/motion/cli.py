@@ -230,7 +230,7 @@ def run(args) -> int:
                 names.append(f"{sc.name}_{k}_{label}")
                 keys.append(job_key({"config": asdict(cfg), "w": w, "model": m, "scene": sc.name, "cloud": cloud,
                                      "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(),
-                                     "batch": args.batch},
+                                     "batch": args.batch, "body": body.fingerprint},
                                     modules=[volumes[m]], packages=["volsmpl.apps.motion"]))
                 rec = store.get(names[k], keys[k])
                 if rec is not None:
