@@ -153,6 +153,18 @@ def test_resume_reuses_fits_of_the_same_code_and_settings_only(body, tmp_path, c
     assert json.loads((tmp_path / "out" / "results.json").read_text())["batch"] == 2
     assert cli_main(args + ["--batch", "0"]) == 2
     assert "--batch must be >= 1" in capsys.readouterr().err
+    # so is the thread count (a fit timed with other threads is not served as this run's)
+    import torch
+    threads = torch.get_num_threads()
+    try:
+        assert cli_main(args + ["--resume", "--threads", str(threads)]) == 0  # the record of these settings
+        capsys.readouterr()
+        assert cli_main(args + ["--resume", "--threads", str(threads)]) == 0
+        assert "(reused)" in capsys.readouterr().out
+        assert cli_main(args + ["--resume", "--threads", str(threads + 1)]) == 0
+        assert "(reused)" not in capsys.readouterr().out
+    finally:
+        torch.set_num_threads(threads)
 
 
 def test_resume_refits_when_the_object_mesh_file_changes(body, tmp_path, capsys):

@@ -357,3 +357,24 @@ def test_resume_recomputes_a_sequence_made_with_another_body(tmp_path, monkeypat
     monkeypatch.setattr(volsmpl, "create_body", taller_body)
     assert main(argv) == 0
     assert case.read_text() != first  # recomputed, not reused
+
+
+@pytest.mark.slow
+def test_resume_recomputes_a_sequence_made_with_another_thread_count(tmp_path):
+    """The torch thread count is part of a sequence's key: a record timed (and summed) with other threads is not
+    served as this run's."""
+    from volsmpl.cli import main
+    out = tmp_path / "motion"
+    argv = ["motion", "--model", "mesh", "--scenes", "1", "--sequences", "1", "--frames", "10", "--iters", "1",
+            "--cost-frames", "1", "--cost-repeats", "1", "--render", "0", "--out", str(out), "--resume"]
+    threads = torch.get_num_threads()
+    try:
+        assert main(argv + ["--threads", str(threads)]) == 0
+        (case,) = (out / "cases").glob("*.json")
+        first = case.read_text()
+        assert main(argv + ["--threads", str(threads)]) == 0
+        assert case.read_text() == first  # same settings: reused
+        assert main(argv + ["--threads", str(threads + 1)]) == 0
+        assert case.read_text() != first  # recomputed, not reused
+    finally:
+        torch.set_num_threads(threads)

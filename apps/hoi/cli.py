@@ -160,10 +160,12 @@ def run(args) -> int:
         digests = {c.name: mesh_digest(c) for c in group}  # a user's mesh file: its content, not only its name
         problem = None  # the group's Problem, built once: it reads only what every kind shares (prepare sets the kind)
         for m in models:
-            # the batch size is part of a fit's key: its time per case depends on it
+            # the batch size and the thread count are part of a fit's key: its time per case depends on both
+            # (and the thread count may change the summation order of its values)
             keys = {c.name: job_key({"config": asdict(cfg), "model": m, "case": case_to_dict(c),
                                      **({"mesh_sha256": digests[c.name]} if digests[c.name] else {}),
-                                     **({"batch": args.batch} if args.batch > 1 else {})},
+                                     **({"batch": args.batch} if args.batch > 1 else {}),
+                                     "threads": torch.get_num_threads()},
                                     modules=[volumes[m]], packages=["volsmpl.apps.hoi"]) for c in group}
             recs = {c.name: store.get(f"{c.name}_{m}", keys[c.name]) for c in group}
             todo = [c for c in group if recs[c.name] is None]

@@ -230,7 +230,8 @@ def run(args) -> int:
                 names.append(f"{sc.name}_{k}_{label}")
                 keys.append(job_key({"config": asdict(cfg), "w": w, "model": m, "scene": sc.name, "cloud": cloud,
                                      "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(),
-                                     "batch": args.batch, "body": body.fingerprint},
+                                     "batch": args.batch, "body": body.fingerprint,
+                                     "threads": torch.get_num_threads()},
                                     modules=[volumes[m]], packages=["volsmpl.apps.motion"]))
                 rec = store.get(names[k], keys[k])
                 if rec is not None:
