@@ -260,6 +260,8 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
     if not resume and (out_dir / "latest").exists():
         raise FileExistsError(f"{out_dir} already holds a run; pass --resume to continue it or choose another --out.")
     saved = None
+    if init is not None and ck is not None and rank == 0:  # said, not silently skipped (a script may pass both)
+        print(f"--init {init} is not used: --resume continues {out_dir} from its checkpoint {ck.name}", file=sys.stderr)
     if init is not None and ck is None:
         state, cfg_dict, meta = load_checkpoint(init, expected_fingerprint=volume.fingerprint)
         if cfg_dict != cfg.model.to_dict():

@@ -425,6 +425,12 @@ def test_cli_resume_and_init_take_the_checkpoints_training_config(tmp_path, caps
                  "--max-steps", "1", "--device", "cpu", "--set", "lr=5e-5"]) == 0, capsys.readouterr().err
     assert json.loads((c / "config.json").read_text()) == {**cfg.to_dict(), "lr": 5e-5}
     assert (c / "latest").read_text() == "ckpt-00000003"
+    # --init beside --resume of a run that has a checkpoint continues the run, and says that --init is not used
+    capsys.readouterr()
+    assert main(["train", "--init", str(tmp_path / "a" / "ckpt-00000002" / "model"), "--resume", "--out", str(c),
+                 "--max-steps", "1", "--device", "cpu"]) == 0
+    assert "is not used: --resume continues" in capsys.readouterr().err
+    assert (c / "latest").read_text() == "ckpt-00000004"
 
 
 def test_nothing_to_train_is_said_not_done_step_none(tmp_path, capsys):
