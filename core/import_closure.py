@@ -14,6 +14,7 @@ when any of its modules is imported (Python runs it). `volsmpl` maps to `core/` 
 from __future__ import annotations
 
 import ast
+from functools import lru_cache
 from pathlib import Path
 
 #: package prefix -> repository folder (longest prefix first)
@@ -50,8 +51,15 @@ def imported_modules(path: Path, module: str) -> set[str]:
     """Dotted names this file imports (relative imports resolved against `module`); for `from a import b`
     both `a` and `a.b` (b may be a submodule); string constants that name a `volsmpl` module (with or without
     ":attribute") count as imports. Names that are not modules of this repository are dropped later."""
-    tree = ast.parse(Path(path).read_text(encoding="utf-8"), filename=str(path))
     package = module if Path(path).name == "__init__.py" else module.rpartition(".")[0]
+    return set(_imports(Path(path).read_text(encoding="utf-8"), package, str(path)))
+
+
+@lru_cache(maxsize=1024)
+def _imports(text: str, package: str, filename: str) -> frozenset:
+    """imported_modules of one source text (memoised by the text itself: a report parses each module once, not
+    once per section, and an edited file is parsed again)."""
+    tree = ast.parse(text, filename=filename)
     found: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
@@ -67,7 +75,7 @@ def imported_modules(path: Path, module: str) -> set[str]:
             found.update(f"{base}.{alias.name}" for alias in node.names if alias.name != "*")
         elif isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.startswith("volsmpl."):
             found.add(node.value.partition(":")[0])  # registry entries import by name: "volsmpl.nn.coap_net:CoapNet"
-    return found
+    return frozenset(found)
 
 
 def _parents(module: str):
