@@ -11,7 +11,9 @@ Memory is the peak above what was in use when the block started: on CUDA the cac
 that reset is unavailable, from `ru_maxrss` when the block set a new high-water mark of the process (exact),
 else from a thread polling /proc/self/statm every 0.2 ms (torch releases the GIL inside operators; a spike
 shorter than the interval can be missed; the polling thread also slows Python-heavy blocks, by up to 1.5x on
-the 2-core project machine, so time such blocks with memory=False). Freed heap is returned to the OS before
+the 2-core project machine, so time such blocks with memory=False). Without /proc (macOS) only the rise of
+`ru_maxrss` during the block is known: a lower bound of its peak above the start, 0 where the block stayed
+below an earlier peak of the process; `method` says so. Freed heap is returned to the OS before
 the block (glibc `malloc_trim`), so the block's own pages count. Meters may nest: an inner meter's reset of a
 peak mark first hands the peak so far to the meters around it.
 
@@ -160,6 +162,9 @@ class Meter:
                 self._hand_peak_to_outer()
                 torch.cuda.reset_peak_memory_stats(self.device)
                 self._base = self._seen = torch.cuda.memory_allocated(self.device)
+            elif rss_bytes() < 0:  # no /proc: the rise of the process's high-water mark is all there is
+                self._mode = "maxrss"
+                self._hw0 = self._base = maxrss_bytes()
             else:
                 malloc_trim()
                 self._mode = "hwm"
@@ -192,6 +197,12 @@ class Meter:
             peak = self._peak_now()
             self.peak_bytes, self.peak_total_bytes = int(max(0, peak - self._base)), int(peak)
             self.method = "VmHWM (peak RSS mark reset at the start)"
+            return False
+        if self._mode == "maxrss":
+            hw1 = maxrss_bytes()
+            self.peak_bytes, self.peak_total_bytes = int(max(0, hw1 - self._hw0)), int(hw1)
+            self.method = ("ru_maxrss rise (no /proc here): a lower bound of the block's peak above its start, 0 "
+                           "where the block stayed below an earlier peak of the process")
             return False
         self._sampler.__exit__(*exc)
         hw1 = maxrss_bytes()

@@ -8,6 +8,7 @@ import textwrap
 import pytest
 import torch
 
+from volsmpl import meter
 from volsmpl.meter import Meter, peak_memory, run_isolated, timed_ms
 
 N_FLOATS = 50_000_000  # 200 MB of float32
@@ -165,3 +166,23 @@ def test_nested_cuda_meters_keep_the_outer_peak(monkeypatch):
             gpu.free(100e6)
     assert inner.peak_bytes == 100e6 and outer.peak_bytes == 300e6, (inner.peak_bytes, outer.peak_bytes)
     assert outer.peak_total_bytes == 350e6 and outer.kind == "cuda max_memory_allocated"
+
+
+def test_cpu_meter_without_proc_reports_the_rise_of_ru_maxrss(monkeypatch):
+    """Where /proc is missing (macOS: no RSS, no VmHWM reset), the meter reports the rise of the process's
+    high-water mark during the block, named as a lower bound, 0 when the block stayed below an earlier peak;
+    never a figure made from the missing RSS (-1) and no polling thread."""
+    import threading
+
+    marks = iter([300 << 20, 420 << 20, 500 << 20, 500 << 20])
+    monkeypatch.setattr(meter, "rss_bytes", lambda: -1)
+    monkeypatch.setattr(meter, "hwm_bytes", lambda: -1)
+    monkeypatch.setattr(meter, "maxrss_bytes", lambda: next(marks))
+    threads = threading.active_count()
+    with Meter("cpu") as m:
+        assert threading.active_count() == threads
+    assert m.peak_bytes == 120 << 20 and m.peak_total_bytes == 420 << 20
+    assert "lower bound" in m.method and "ru_maxrss" in m.method
+    with Meter("cpu") as m:
+        pass
+    assert m.peak_bytes == 0 and "below an earlier peak" in m.method
