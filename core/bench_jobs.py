@@ -193,7 +193,8 @@ def _outside_aten(event) -> bool:
 
 def build_volume(body, spec: dict):
     """The volume a job measures: spec {'model', 'dense', 'checkpoint' (or None: random init), 'init_seed',
-    optional 'engine' (Volume.engine, default 'lean'), optional 'precision' (Volume.set_precision, default 'full')}."""
+    optional 'engine' (Volume.engine, default 'lean'), optional 'precision' (Volume.set_precision, default 'full'),
+    optional 'one_chunk' (True: every query in one chunk, decoders untiled)}."""
     from .attach import attach_volume
 
     if spec.get("checkpoint"):
@@ -203,10 +204,10 @@ def build_volume(body, spec: dict):
         vol = attach_volume(body, model=spec["model"], pretrained=False, dense=spec["dense"])
     vol.engine = spec.get("engine", "lean")
     vol.set_precision(spec.get("precision", "full"))
-    if spec["dense"]:
+    if spec["dense"] or spec.get("one_chunk"):
         # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
-        # no cache tiling
-        vol.chunk_elems = 1 << 62
+        # no cache tiling; 'one_chunk' does the same on the sparse path
+        vol.chunk_elems = vol.cpu_chunk_elems = 1 << 62
         vol.net.set_tile_rows(1 << 62)
     return vol
 

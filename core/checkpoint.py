@@ -134,6 +134,15 @@ def checkpoint_model(path: str | os.PathLike) -> str:
     return kind_of_config(cfg)
 
 
+def expect_checkpoint_model(path: str | os.PathLike, model: str, option: str, fix: str) -> None:
+    """ValueError in one line when the checkpoint given by `option` holds another model kind than `model`;
+    `fix` is the remedy, with '{held}' standing for the kind it holds. Example:
+        >>> expect_checkpoint_model(p, "coap", "--checkpoint-coap", "pass it as --checkpoint-{held}.")"""
+    held = checkpoint_model(path)
+    if held != model:
+        raise ValueError(f"{option} {path} holds a {held} model, not {model}; " + fix.format(held=held))
+
+
 def _folder_hint(path) -> Optional[str]:
     """The fix when `path` names a folder rather than a checkpoint: a training-state folder (ckpt-<step>/, whose
     model is <folder>/model) or a run folder (its latest training state's model); None for anything else."""

@@ -53,8 +53,10 @@ class Volume(EncodingCache, BodyVolume):
         net: the network (VolumetricSMPLNet, or CoapNet for the occupancy baseline).
         dense: evaluate every part decoder on every point (reference path) instead of only the
             (point, part) pairs inside part boxes (default, same values and gradients).
-        chunk_elems: memory budget of one query chunk in (body, part, point) entries (`query` on the grouped
-            engine holds ~4x less per entry and takes LEAN_FACTOR times as many).
+        chunk_elems: memory budget of one query chunk in (body, part, point) entries (every path; on the CPU the
+            lean path also stops at cpu_chunk_elems). Peak bytes per entry of one no-grad chunk, measured on the
+            CPU at 60k points (2026-11-26): ~50 on 'chunked', ~100 on 'lean' where most points are in no box
+            (their box distances), less where most are in a box.
         engine: the sparse query path: 'lean' (default: `query` culls by boxes, runs the decoders on the pairs
             inside, takes their minimum by one scatter and computes box distances only for the points in no box,
             with one host sync) or 'chunked' (the engine before issue 28: every part's box distance at every
@@ -72,7 +74,6 @@ class Volume(EncodingCache, BodyVolume):
 
     ENGINES = ("lean", "chunked")
     PAIR_DECODERS = ("tiles", "grouped")
-    LEAN_FACTOR = 4
 
     def __init__(self, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
                  dense: bool = False, chunk_elems: int = 1 << 21, engine: str = "lean", pair_decoder: str = "tiles",
@@ -83,6 +84,7 @@ class Volume(EncodingCache, BodyVolume):
         self.fingerprint = fingerprint
         self.dense = dense
         self.chunk_elems = int(chunk_elems)
+        self.cpu_chunk_elems = self.CPU_CHUNK_ELEMS
         if engine not in self.ENGINES:
             raise ValueError(f"engine must be one of {self.ENGINES}, got {engine!r}")
         if pair_decoder not in self.PAIR_DECODERS:
@@ -304,17 +306,18 @@ class Volume(EncodingCache, BodyVolume):
         return res.view(B, N)
 
     #: on the CPU a lean chunk holds at most this many (body, part, point) entries (its arrays then stay in cache):
-    #: at 60k points, 2 bodies per chunk cost 1.5x per body what 1 body per chunk costs (B = 8, 1 thread, 2026-11-25)
+    #: at 60k points, 2 bodies per chunk cost 1.5x per body what 1 body per chunk costs (B = 8, 1 thread, 2026-11-25);
+    #: the default of `cpu_chunk_elems` (bench model 'volsmpl-onechunk' measures one chunk for the whole batch)
     CPU_CHUNK_ELEMS = 1 << 20
 
     def _lean_chunks(self, B: int, N: int, device=None) -> list:
         """Chunks (b0, b1, s, e) of the lean query on `device`: whole bodies while a chunk's (body, part, point)
-        entries stay within chunk_elems (on the CPU also within CPU_CHUNK_ELEMS, so that each body's work runs as
+        entries stay within chunk_elems (on the CPU also within cpu_chunk_elems, so that each body's work runs as
         at B = 1, in cache), else point ranges of one body."""
         per_body = self.num_parts * max(1, N)
         budget = self.chunk_elems
         if device is not None and torch.device(device).type == "cpu":
-            budget = min(budget, self.CPU_CHUNK_ELEMS)
+            budget = min(budget, self.cpu_chunk_elems)
         if per_body <= budget:
             nb = max(1, budget // per_body)
             return [(b, min(B, b + nb), 0, N) for b in range(0, B, nb)]

@@ -186,3 +186,35 @@ def test_reduced_precision_models(tmp_path):
     if ckpt is not None:
         acc = accuracy("volsmpl", ckpt, cfg, "bf16")
         assert acc["precision"] == "bf16" and 0.5 < acc["metrics"]["iou_mean"] <= 1.0
+
+
+def test_one_chunk_model_has_operator_calls_independent_of_batch():
+    """'volsmpl-onechunk' runs a query as one chunk: the same operator calls at B = 1 and B = 3 (the profiler's
+    count), where the default sparse model, whose CPU chunks hold at most cpu_chunk_elems entries, makes one chunk
+    per (body, point range) and so more calls with more bodies; both give the same values."""
+    import torch
+
+    from volsmpl.bench import MODELS, ONE_CHUNK
+    from volsmpl.bench_jobs import build_volume, profile_query
+
+    body = volsmpl.create_body()
+    n = volsmpl.volume.Volume.CPU_CHUNK_ELEMS // 16 + 5000  # just over one body's cache chunk: 2 point ranges
+    counts, values = {}, {}
+    for name in ("volsmpl", "volsmpl-onechunk"):
+        spec = {"model": MODELS[name][0], "dense": False, "checkpoint": None, "init_seed": 0,
+                "one_chunk": name in ONE_CHUNK}
+        vol = build_volume(body, spec)
+        assert vol.num_parts == 16
+        for B in (1, 3):
+            g = torch.Generator().manual_seed(B)
+            with torch.no_grad():
+                out = body(body_pose=0.1 * torch.randn(B, 69, generator=g))
+                lo, hi = out.vertices.amin(1, keepdim=True), out.vertices.amax(1, keepdim=True)
+                pts = lo + (hi - lo) * torch.rand(B, n, 3, generator=g)
+                enc = vol.encode(out, fresh=True)
+                counts[name, B] = profile_query(lambda: vol.query_encoded(enc, pts), 1)["ops_per_query"]
+                values[name, B] = vol.query_encoded(enc, pts)
+    assert counts["volsmpl-onechunk", 1] == counts["volsmpl-onechunk", 3]
+    assert counts["volsmpl", 3] > counts["volsmpl", 1] > counts["volsmpl-onechunk", 1]
+    for B in (1, 3):
+        torch.testing.assert_close(values["volsmpl-onechunk", B], values["volsmpl", B], atol=1e-5, rtol=1e-5)

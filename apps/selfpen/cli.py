@@ -70,7 +70,7 @@ def add_parser(sub):
 def _checkpoints(args, models: list[str]) -> dict:
     """model -> checkpoint path or None (shipped); each given checkpoint is checked to exist and to hold its model,
     and one given for a model that does not run is refused (it would be ignored)."""
-    from volsmpl.checkpoint import checkpoint_model
+    from volsmpl.checkpoint import expect_checkpoint_model
 
     ck = {m: None for m in models}
     for m, c in (("volsmpl", args.checkpoint_volsmpl), ("coap", args.checkpoint_coap)):
@@ -89,11 +89,9 @@ def _checkpoints(args, models: list[str]) -> dict:
     if args.random_init and any(ck.values()):
         raise ValueError("--random-init and a checkpoint exclude each other")
     for m, c in ck.items():
-        held = None if c is None else checkpoint_model(c)
-        if held is not None and held != m:
+        if c is not None:
             option = "--checkpoint" if c == args.checkpoint else f"--checkpoint-{m}"
-            raise ValueError(f"{option} {c} holds a {held} model, not {m}; give it to {held} (--model {held}, "
-                             f"--checkpoint-{held}).")
+            expect_checkpoint_model(c, m, option, "give it to {held} (--model {held}, --checkpoint-{held}).")
     return ck
 
 
