@@ -10,6 +10,13 @@ def inside_boxes(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Te
     return ((x_local >= box_min[:, :, None]) & (x_local <= box_max[:, :, None])).all(dim=-1)
 
 
+def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Similarity that maps each padded part box into [-1, 1]^3 along its longest side: centre (B, K, 3) and
+    isotropic scale (B, K, 1) = half the longest side. Decoders of normalised models read (x_k - c) / s and
+    their output times s is metres: distances scale with the similarity, so the SDF stays an SDF."""
+    return 0.5 * (box_min + box_max), 0.5 * (box_max - box_min).amax(dim=-1, keepdim=True)
+
+
 def obb(G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
     """World-frame oriented boxes: centres (..., 3), axes (..., 3, 3) as columns, half extents (..., 3)."""
     c_local = 0.5 * (box_min + box_max)

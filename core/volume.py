@@ -22,7 +22,7 @@ import torch
 from torch.profiler import record_function
 
 from .body_view import select_body
-from .boxes import inside_boxes, near_boxes
+from .boxes import inside_boxes, near_boxes, part_normalization
 from .collision import reduce_penetration
 from .encoding import Encoding, EncodingCache
 from .models import kind_of_network, model_kind
@@ -37,13 +37,6 @@ from .volume_api import BodyVolume, check_output
 
 #: profiler scope of the decoder evaluations of a query (volsmpl bench times the decoder alone by it)
 DECODER_SCOPE = "volsmpl::decoder"
-
-
-def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """Similarity that maps each padded part box into [-1, 1]^3 along its longest side: centre (B, K, 3) and
-    isotropic scale (B, K, 1) = half the longest side. Decoders of normalised models read (x_k - c) / s and
-    their output times s is metres: distances scale with the similarity, so the SDF stays an SDF."""
-    return 0.5 * (box_min + box_max), 0.5 * (box_max - box_min).amax(dim=-1, keepdim=True)
 
 
 class Volume(EncodingCache, BodyVolume):
@@ -107,9 +100,7 @@ class Volume(EncodingCache, BodyVolume):
         for all K parts, the code is for `parts`, see Encoding). frames: (G, box_min, box_max) of `out`
         when already computed (see _frames). code_grad=False runs the encoder without autograd: the codes are
         constants and gradients reach the body only through the part frames and boxes (rigid part motion)."""
-        v, dtype = out.vertices, out.vertices.dtype
-        if v.ndim != 3 or v.shape[-1] != 3:
-            raise ValueError(f"out.vertices must be (B, V, 3), got {tuple(v.shape)}")
+        v, dtype = out.vertices, out.vertices.dtype  # (B, V, 3): callers ran check_output
         p = self.partition
         if p.faces.device != v.device or next(self.net.parameters()).dtype != dtype:
             raise ValueError(f"the body output is {dtype} on {v.device} but the volume is "
@@ -221,13 +212,17 @@ class Volume(EncodingCache, BodyVolume):
         self.precision = precision
         return self
 
-    def _decode_xin(self, enc: Encoding, xin: torch.Tensor, b: torch.Tensor, kc: torch.Tensor) -> torch.Tensor:
+    def _decode_xin(self, enc: Encoding, xin: torch.Tensor, b: torch.Tensor, kc: torch.Tensor,
+                    counts_host: list | None = None) -> torch.Tensor:
         """Decoder inputs xin (M, 3) of pairs of body b (M,) and code part kc (M,) -> (M,), on the engine
-        pair_decoder picks, in `precision` (bf16 always takes the grouped engine, in bfloat16)."""
+        pair_decoder picks, in `precision` (bf16 always takes the grouped engine, in bfloat16). counts_host: the
+        pairs per (body, code part) group, when known on the host (the tiled decoder then makes no host sync)."""
         bf16 = self.precision == "bf16"
         with matmul_precision(self.precision, xin.device):
             if not bf16 and not self._grouped_ok(xin):
-                return self.net.decode_pairs(xin, b, kc, enc.code)
+                if counts_host is None:
+                    return self.net.decode_pairs(xin, b, kc, enc.code)
+                return self.net.decode_pairs(xin, b, kc, enc.code, counts_host=counts_host)
             if enc.grouped is None or (torch.is_grad_enabled() and enc.code.z.requires_grad
                                        and not enc.grouped[0].requires_grad):  # made without a graph: remake
                 enc.grouped = self.net.grouped_matrices(enc.code)
@@ -248,8 +243,9 @@ class Volume(EncodingCache, BodyVolume):
         minimum over parts of the box distance, computed for them only (outside=False leaves them +inf, for
         callers to whom a point in no box is worth nothing: the collision loss). The box test runs without autograd;
         the coordinates of the pairs (and of the points in no box) are formed again from R_k, t_k and the box, so
-        the backward pass touches those only. One host sync (the two counts), then fixed-size nonzero. Same values
-        as `_part_values` + minimum (the dense reference) up to rounding."""
+        the backward pass touches those only. One host sync (the pairs per (body, part) and the points in no box;
+        the decoders get the former, so they make none), then fixed-size nonzero. Same values as `_part_values` +
+        minimum (the dense reference) up to rounding."""
         B, N = points.shape[:2]
         K = self.num_parts
         G, box_min, box_max = (x[b0:b0 + B] for x in (enc.G, enc.box_min, enc.box_max))
@@ -269,7 +265,13 @@ class Volume(EncodingCache, BodyVolume):
         inside = raw if enc.slot is None else raw & enc.encoded(K)
         free = ~inside.any(dim=-1)                                            # (B, N)
         n_free_t = free.sum() if outside else torch.zeros((), dtype=torch.long, device=free.device)
-        n_pairs, n_free = torch.stack([inside.sum(), n_free_t]).tolist()     # the query's one host sync
+        per_group = inside.sum(dim=1)                                         # (B, K) pairs per (body, part)
+        if enc.slot is not None:
+            per_group = per_group[:, enc.parts]                               # in the code's part order
+        host = torch.cat([per_group.reshape(-1), n_free_t.reshape(1)]).tolist()   # the query's one host sync
+        n_free, n_pairs = host.pop(), sum(host)
+        Kc = per_group.shape[1]                                               # groups of the whole encoding:
+        counts_host = [0] * (b0 * Kc) + host + [0] * ((enc.G.shape[0] - b0 - B) * Kc)
         b, n, k = torch.nonzero_static(inside, size=n_pairs).unbind(1)
         self.decoder_evaluations += n_pairs
         res = points.new_full((B * N,), float("inf")) if not outside else points.new_zeros(B * N)
@@ -299,7 +301,7 @@ class Volume(EncodingCache, BodyVolume):
                 xin = ub + c[b, k]
             kc = k if enc.slot is None else enc.slot[k]
             with record_function(DECODER_SCOPE):
-                vals = self._decode_xin(enc, xin, b + b0, kc)
+                vals = self._decode_xin(enc, xin, b + b0, kc, counts_host)
             if enc.scale is not None:
                 vals = vals * sc[:, 0]
             res = res.scatter_reduce(0, b * N + n, vals, "amin", include_self=False)

@@ -327,3 +327,22 @@ def test_group_counts_and_a_layout_from_host_counts():
     a, b = group_pairs(g, 9, 16), group_pairs(g, 9, 16, c, c.tolist())
     for x, y in zip(a[:3], b[:3]):
         assert torch.equal(x, y)
+
+
+def test_decode_pairs_with_host_counts_equals_without_and_checks_them():
+    """Group counts handed over by the caller (the lean query's one sync) give the same values as counting here;
+    counts that do not describe the pairs (wrong number of groups, wrong total) are refused in one line."""
+    m = _tiny(K=4)
+    g = torch.Generator().manual_seed(3)
+    B, M = 3, 150
+    z = torch.randn(B, 4, 5, dtype=torch.float64, generator=g)
+    gen = m.generate(z)
+    x = torch.randn(M, 3, dtype=torch.float64, generator=g) * 0.5
+    bi, pi = torch.randint(0, B, (M,), generator=g), torch.randint(0, 4, (M,), generator=g)
+    counts = torch.bincount(bi * 4 + pi, minlength=B * 4).tolist()
+    with torch.no_grad():
+        torch.testing.assert_close(m.decode_pairs(x, bi, pi, gen, counts_host=counts), m.decode_pairs(x, bi, pi, gen),
+                                   atol=0, rtol=0)
+        for bad in (counts[:-1], counts[:-1] + [counts[-1] + 1]):
+            with pytest.raises(ValueError, match="counts_host must hold 12 group counts summing to the 150 pairs"):
+                m.decode_pairs(x, bi, pi, gen, counts_host=bad)

@@ -399,6 +399,38 @@ def test_chunking_bounded(vbody):
         vol.chunk_elems = old
 
 
+def test_lean_query_makes_one_host_sync_per_chunk(vbody, monkeypatch):
+    """On a GPU every tensor-to-host read waits for the device: the lean query (tiled pair decoder, the default)
+    reads the host once per chunk, its pairs per (body, part) and its points in no box, and hands the former to the
+    decoder (which read them again before, with a bounds check: three reads per chunk). Counted by wrapping every
+    Tensor method that reads values to the host; with and without gradients, whole encodings and subset ones."""
+    import collections
+
+    vol = vbody.volume
+    out = vbody(**random_pose(2, seed=21))
+    pts = torch.cat([_near_points(out, 400, seed=21), torch.full((2, 3, 3), 4.0)], dim=1)
+    reads = collections.Counter()
+    for name in ("tolist", "item", "__int__", "__float__", "__bool__", "__index__"):
+        original = getattr(torch.Tensor, name)
+
+        def counted(self, *a, _name=name, _original=original, **k):
+            reads[_name] += 1
+            return _original(self, *a, **k)
+        monkeypatch.setattr(torch.Tensor, name, counted)
+    full = vol.encode(out, fresh=True)
+    subset = vol._encode(out, None, parts=torch.tensor([0, 3, 9, 12]))
+    for enc in (full, subset):
+        for grad in (False, True):
+            for elems, n_chunks in ((vol.CPU_CHUNK_ELEMS, 1), (403 * vol.num_parts, 2)):
+                monkeypatch.setattr(vol, "cpu_chunk_elems", elems)
+                assert len(vol._lean_chunks(2, pts.shape[1], "cpu")) == n_chunks
+                reads.clear()
+                p = pts.clone().requires_grad_(grad)
+                with torch.set_grad_enabled(grad):
+                    vol.query_encoded(enc, p)
+                assert dict(reads) == {"tolist": n_chunks}, (grad, n_chunks, dict(reads))
+
+
 def test_lean_chunks_one_body_per_chunk_on_the_cpu(vbody):
     """At the benchmark's 60k points a lean chunk on the CPU holds one body (its arrays stay in cache: per-body time at
     B = 8 as at B = 1), on other devices as many whole bodies as chunk_elems allows; small queries still batch
@@ -561,7 +593,7 @@ def nbody(tiny_config):
 
 
 def test_part_normalization_maps_boxes_into_unit_cube():
-    from volsmpl.volume import part_normalization
+    from volsmpl.boxes import part_normalization
     lo = torch.tensor([[[-0.1, 0.0, 0.2], [1.0, 1.0, 1.0]]])
     hi = torch.tensor([[[0.3, 0.1, 0.3], [1.2, 1.6, 1.1]]])
     c, s = part_normalization(lo, hi)

@@ -55,7 +55,7 @@ class VolumeConfig(JsonConfig):
             R matrices (K times more parameters, ~47M at K=15).
         normalize_parts: feed the encoder and the decoders part-frame coordinates mapped by the similarity
             that takes the part's padded box into [-1, 1]^3 (longest side), and scale the decoder output
-            back to metres (`volume.part_normalization`). Not in the paper (its x_k is the rigid part-frame
+            back to metres (`boxes.part_normalization`). Not in the paper (its x_k is the rigid part-frame
             point: False, the default). A 64-wide decoder reading a hand's +-5 cm coordinates must first grow
             its weights ~20x; measured from scratch (batch 2, 250 steps, same data, held-out batch of 4
             bodies): MSE 1.06e-4 vs 1.79e-4, wrong signs 23.0 % vs 27.7 %, IoU 0.59 vs 0.54.

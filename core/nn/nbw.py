@@ -142,8 +142,10 @@ def default_chunk(n_pairs: int, n_nonempty: int) -> int:
     return int(min(512, max(16, 1 << (half.bit_length() - 1))))
 
 
-def check_pairs(x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor, B: int, K: int) -> torch.Tensor:
-    """Validate (point, body, part) pairs for a decoder batch of B bodies x K parts.
+def check_pairs(x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor, B: int, K: int,
+                bounds: bool = True) -> torch.Tensor:
+    """Validate (point, body, part) pairs for a decoder batch of B bodies x K parts (bounds=False: shapes and
+    dtypes only, no host sync, for indices the caller made in range).
 
     Args: x_local (M, 3); body_idx, part_idx (M,) integers. Returns the group ids body * K + part (M,) int64.
     """
@@ -155,7 +157,7 @@ def check_pairs(x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.T
                          f"got {tuple(body_idx.shape)} and {tuple(part_idx.shape)}")
     if body_idx.dtype not in (torch.int64, torch.int32) or part_idx.dtype not in (torch.int64, torch.int32):
         raise TypeError("decode_pairs: body_idx and part_idx must be integer (int64) tensors")
-    if M:
+    if M and bounds:
         # one host sync for the four bounds (four on a GPU before)
         bmin, bmax, pmin, pmax = torch.stack([body_idx.min(), body_idx.max(), part_idx.min().to(body_idx.dtype),
                                               part_idx.max().to(body_idx.dtype)]).tolist()
@@ -337,7 +339,7 @@ class NBWDecoder(nn.Module):
         return h.squeeze(-1) if self.out_dim == 1 else h
 
     def decode_pairs(self, x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor,
-                     gen: NBWWeights, chunk: Optional[int] = None) -> torch.Tensor:
+                     gen: NBWWeights, chunk: Optional[int] = None, counts_host: Optional[list] = None) -> torch.Tensor:
         """Evaluate each point only with its own (body, part) decoder.
 
         Pairs are grouped by (body, part) and cut into equal chunks (:func:`group_pairs`), so every
@@ -350,18 +352,25 @@ class NBWDecoder(nn.Module):
             part_idx: (M,) int64 part index in [0, K).
             gen: weights from :meth:`generate`.
             chunk: rows per matmul chunk; default :func:`default_chunk`.
+            counts_host: pairs per (body, part) group (B * K ints, body-major) when the caller holds them on the
+                host already (the lean query counts them in its one sync): the indices are then taken as in
+                range and the call makes no host sync; without it, two (bounds, then the layout).
         Returns:
             (M,) signed distances (out_dim == 1) or (M, out_dim).
         """
         B, K = self._check_gen(gen)
-        group = check_pairs(x_local, body_idx, part_idx, B, K)
+        group = check_pairs(x_local, body_idx, part_idx, B, K, bounds=counts_host is None)
         M = x_local.shape[0]
+        G = B * K
+        if counts_host is not None and (len(counts_host) != G or sum(counts_host) != M):
+            raise ValueError(f"decode_pairs: counts_host must hold {G} group counts summing to the {M} pairs, got "
+                             f"{len(counts_host)} summing to {sum(counts_host)}")
         if M == 0:
             out = x_local.sum(-1)
             return out if self.out_dim == 1 else out.unsqueeze(-1).expand(0, self.out_dim)
-        G = B * K
         counts = group_counts(group, G)
-        counts_host = counts.tolist()  # the layout's one host sync: chunk size and number of chunks from it
+        if counts_host is None:
+            counts_host = counts.tolist()  # the layout's host sync: chunk size and number of chunks from it
         if chunk is None:
             chunk = default_chunk(M, sum(c > 0 for c in counts_host))
         lay = group_pairs(group, G, int(chunk), counts, counts_host)

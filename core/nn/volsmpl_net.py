@@ -57,9 +57,11 @@ class VolumetricSMPLNet(nn.Module):
         """x_local (B, K, N, 3) -> (B, K, N): every part's decoder on every point."""
         return self.decoder.decode_dense(x_local, code.weights)
 
-    def decode_pairs(self, x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor, code: PartCode) -> torch.Tensor:
-        """x_local (M, 3) in the frame of part part_idx of body body_idx -> (M,)."""
-        return self.decoder.decode_pairs(x_local, body_idx, part_idx, code.weights)
+    def decode_pairs(self, x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor, code: PartCode,
+                     counts_host: list | None = None) -> torch.Tensor:
+        """x_local (M, 3) in the frame of part part_idx of body body_idx -> (M,); counts_host: pairs per (body,
+        part) group when the caller holds them (NBWDecoder.decode_pairs: then no host sync)."""
+        return self.decoder.decode_pairs(x_local, body_idx, part_idx, code.weights, counts_host=counts_host)
 
     def grouped_supported(self, dtype: torch.dtype, device=None) -> bool:
         """Whether `decode_grouped` runs in `dtype` on `device` (volsmpl.nn.grouped)."""
