@@ -58,13 +58,33 @@ def _source_digest(packages: tuple) -> str:
     return "sha256:" + h.hexdigest()
 
 
+def _exact(value):
+    """JSON stand-in of a configuration value that JSON has no type for, exact in every element: an array or
+    tensor by its dtype, shape and the sha256 of its bytes (str() abbreviates large ones: two arrays that differ
+    inside the '...' would share a key); numpy scalars as numbers; paths, devices, dtypes by their name."""
+    import numpy as np
+    import torch
+
+    if isinstance(value, torch.Tensor):
+        value = value.detach().cpu().numpy()
+    if isinstance(value, np.ndarray):
+        a = np.ascontiguousarray(value)
+        return {"array": str(a.dtype), "shape": list(a.shape), "sha256": hashlib.sha256(a.tobytes()).hexdigest()}
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (os.PathLike, torch.device, torch.dtype)):
+        return str(value)
+    raise TypeError(f"job_key: a configuration value of type {type(value).__name__} has no exact JSON form; pass "
+                    f"numbers, strings, lists, dicts, arrays or tensors")
+
+
 def job_key(config: dict, modules: Iterable = (), packages: Iterable[str] = ()) -> str:
-    """The key of a job: sha256 over its configuration (canonical JSON), the weights of each module it uses (e.g.
-    the attached volumes: every tensor of their state dicts, `volsmpl.checkpoint.weights_digest`) and
-    `source_digest(packages)`."""
+    """The key of a job: sha256 over its configuration (canonical JSON; arrays and tensors by their bytes, see
+    `_exact`), the weights of each module it uses (e.g. the attached volumes: every tensor of their state dicts,
+    `volsmpl.checkpoint.weights_digest`) and `source_digest(packages)`."""
     from .checkpoint import weights_digest
 
-    h = hashlib.sha256(json.dumps(config, sort_keys=True, separators=(",", ":"), default=str).encode())
+    h = hashlib.sha256(json.dumps(config, sort_keys=True, separators=(",", ":"), default=_exact).encode())
     for m in modules:
         h.update(weights_digest(m.state_dict()).encode())
     h.update(source_digest(packages).encode())

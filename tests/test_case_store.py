@@ -43,3 +43,21 @@ def test_key_changes_with_config_weights_and_code(tmp_path, monkeypatch):
     case_store._source_digest.cache_clear()  # a new process
     assert source_digest(["fakeapp"]) != d0
     assert json.dumps(source_digest()).startswith('"sha256:')
+
+
+def test_key_sees_every_element_of_large_arrays():
+    """Arrays and tensors in a configuration are keyed by their bytes: str() abbreviates arrays of over 1,000
+    elements ('...'), so two that differ only inside the abbreviation shared a key (a stale record reused); a value
+    with no exact JSON form is refused in one line instead of keyed by its str()."""
+    import numpy as np
+
+    a = np.arange(5000, dtype=np.float64)
+    b = a.copy()
+    b[2500] += 1e-9
+    assert str(a) == str(b)
+    assert job_key({"x": a}) != job_key({"x": b})
+    assert job_key({"x": torch.from_numpy(a)}) != job_key({"x": torch.from_numpy(b)})
+    assert job_key({"x": a}) == job_key({"x": a.copy()})
+    assert job_key({"x": np.float32(0.5), "n": np.int64(3)}) == job_key({"x": 0.5, "n": 3})
+    with pytest.raises(TypeError, match="job_key: a configuration value of type object has no exact JSON form"):
+        job_key({"x": object()})
