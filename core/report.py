@@ -1,6 +1,7 @@
 """`volsmpl report`: every result table beside the paper's numbers, in one Markdown file.
 
     volsmpl report [--out docs/report.md] [--results NAME=PATH ...] [--check] [--verify NAME=PATH ...]
+                   [--baseline NAME=PATH ...]
 
 Reads the result JSONs that `volsmpl eval`, `volsmpl bench`, `volsmpl selfpen` and the apps write (nothing is
 run, nothing is fetched), and writes docs/report.md: per section our tables beside the paper's (volsmpl.paper),
@@ -11,7 +12,8 @@ file's mtime) is compared with `git log -1 -- <producer paths>`, the producer pa
 repository module it imports (volsmpl.import_closure: an app's table goes stale when core code it calls changes)
 and the default body's data; a stale result is current again when some of its
 cases, made again at or after the producer's last change, agree with it (`--verify NAME=PATH` stores that check
-beside the result: volsmpl.result_check). Without git the report says so. The sections
+beside the result: volsmpl.result_check; on another machine `--baseline NAME=PATH` chains it through a run of the
+last checked code there). Without git the report says so. The sections
 missing results are listed with the command that produces each. --check exits 1 when a result is stale or
 missing.
 
@@ -32,7 +34,7 @@ from typing import Callable
 from volsmpl import report_sections as rs
 from volsmpl.import_closure import producer_closure
 from volsmpl.outputs import check_writable, write_atomic
-from volsmpl.result_check import check_for, check_path, write_check
+from volsmpl.result_check import chain_check, check_for, check_path, write_check
 
 _HERE = Path(__file__).resolve().parent.parent
 #: the repository root of the source checkout (core/ -> root); else (an installed package) the working directory
@@ -197,8 +199,11 @@ def staleness(path: Path, prov: dict, section: Section, git: Git) -> tuple[str, 
     if not check.get("agree"):
         return verdict, (f"{why}; a re-run at {at} disagrees on {check.get('n_mismatches')} values of "
                          f"{check.get('cases_compared')} cases (e.g. {_mismatch(check)})")
+    base = (f" with the code of {check['baseline']['commit']} on one machine ({check['machine']['cpu']}; the table's "
+            f"machine: {check['machine']['stored_cpu']}), whose own check at {check['chained_from']['fresh_commit']} "
+            f"agreed with the table") if check.get("baseline") else ""
     return "current", (f"re-run check at {at} (not before the producer's last change): {check['cases_compared']} of "
-                       f"{check['cases_total']} cases made again, all {check['values_compared']} values agree "
+                       f"{check['cases_total']} cases made again, all {check['values_compared']} values agree{base} "
                        f"(rel. {check['rel_tol']:g}; times and memory are not compared); {why}")
 
 
@@ -410,6 +415,10 @@ def add_parser(sub):
                    help="compare result NAME with a fresh run of some of its cases (PATH: that run's results.json) "
                         "and store the comparison beside the result (NAME's file .check.json; volsmpl.result_check)")
     p.add_argument("--verify-tol", type=float, default=1e-6, help="relative tolerance of --verify (default 1e-6)")
+    p.add_argument("--baseline", nargs="+", default=[], metavar="NAME=PATH",
+                   help="with --verify NAME=...: compare the fresh run with PATH, a run on the same machine of the code "
+                        "of NAME's current agreeing check, instead of with the stored table (another machine's float "
+                        "rounding; volsmpl.result_check.chain_check)")
     return p
 
 
@@ -419,13 +428,17 @@ def run(args) -> int:
     check_writable(out, "file", "--out")
     if not (args.verify_tol >= 0):
         raise ValueError(f"--verify-tol must be >= 0, got {args.verify_tol}")
-    for name, fresh in parse_overrides(args.verify, flag="--verify").items():
+    verify, baselines = (parse_overrides(a, flag=f) for a, f in ((args.verify, "--verify"), (args.baseline, "--baseline")))
+    for name in set(baselines) - set(verify):
+        raise ValueError(f"--baseline {name}=... needs --verify {name}=... (the fresh run to compare with it)")
+    for name, fresh in verify.items():
         sec = next(sec for sec in SECTIONS.values() if name in sec.results)
         stored = overrides.get(name) or _locate(sec.results[name], ROOT)
         if stored is None:
             raise ValueError(f"--verify {name}: there is no stored result to compare with; make it first "
                              f"(`{sec.commands.get(name, '?')}`) or give it with --results {name}=PATH")
-        c = write_check(stored, fresh, rel_tol=args.verify_tol)
+        c = (chain_check(stored, fresh, baselines[name], rel_tol=args.verify_tol) if name in baselines
+             else write_check(stored, fresh, rel_tol=args.verify_tol))
         print(f"{name}: {c['cases_compared']} of {c['cases_total']} cases compared, {c['values_compared']} values, "
               + ("all agree" if c["agree"] else f"{c['n_mismatches']} differ (largest {c['max_abs_diff']:g})")
               + f"; wrote {check_path(stored)}")

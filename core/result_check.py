@@ -13,6 +13,14 @@ at or after the producer's last change and names this very file (`check_for`).
     volsmpl report --verify hoi=out/hoi_check/results.json        # writes docs/hoi/results.check.json
 
 Agreement means every compared number within `rel_tol` (relative) or `abs_tol` (absolute) and every other value equal.
+
+Another machine (another CPU's float rounding, amplified by an iterative sampler) can make the same code give other
+values than the stored table's, so a fresh run there proves nothing about the code. A chained check (`baseline`)
+compares instead two fresh runs on one machine: the current code against the code of the result's last agreeing
+check (an export of its `fresh_commit`). When they agree, the code change changed nothing, and the earlier check ties
+that older code to the table:
+
+    volsmpl report --verify egohmr=out/new/results.json --baseline egohmr=out/old/results.json
 """
 from __future__ import annotations
 
@@ -23,7 +31,8 @@ from pathlib import Path
 
 from .outputs import file_sha256, write_atomic
 
-__all__ = ["IGNORED", "ID_KEYS", "case_leaves", "compare_results", "write_check", "check_path", "check_for"]
+__all__ = ["IGNORED", "ID_KEYS", "case_leaves", "compare_results", "write_check", "chain_check", "check_path",
+           "check_for"]
 
 #: per-record fields that name a case (in this order in its label)
 ID_KEYS = ("model", "w", "scene", "sequence", "name", "frame")
@@ -123,6 +132,45 @@ def write_check(result: Path, fresh_path: Path, rel_tol: float = 1e-6, abs_tol: 
     check.update({"result": Path(result).name, "result_sha256": file_sha256(result), "fresh": str(fresh_path),
                   "fresh_commit": meta.get("git_commit"), "fresh_date": meta.get("date"),
                   "stored_commit": (stored.get("meta") or {}).get("git_commit")})
+    write_atomic(check_path(result), json.dumps(check, indent=1, default=str) + "\n")
+    return check
+
+
+def _meta(d: dict) -> dict:
+    return d.get("meta") if isinstance(d.get("meta"), dict) else {}
+
+
+def chain_check(result: Path, fresh_path: Path, baseline_path: Path, rel_tol: float = 1e-6,
+                abs_tol: float = 1e-9) -> dict:
+    """A chained check (module docstring): the fresh run against `baseline_path`, a run on the same machine of the
+    code of the result's current agreeing check; written beside the result like `write_check`'s, with the earlier
+    check under 'chained_from' and how the baseline differs from the stored table (the machine, not the code) under
+    'machine'. ValueError (one line) when there is no agreeing check to chain from, the baseline was made by other
+    code than that check's, or the two runs were made on different machines."""
+    previous = check_for(result)
+    if previous is None or not previous.get("agree"):
+        raise ValueError(f"--baseline needs an agreeing re-run check of {result} to chain from ({check_path(result).name}); "
+                         f"make one with --verify alone on a machine where the table's own code agrees with it")
+    stored, fresh, base = (json.loads(Path(p).read_text(encoding="utf-8")) for p in (result, fresh_path, baseline_path))
+    at = previous.get("fresh_commit")
+    if not at or not str(_meta(base).get("git_commit") or "").startswith(str(at)[:7]):
+        raise ValueError(f"--baseline {baseline_path} was made at {_meta(base).get('git_commit')}, but the check to chain "
+                         f"from was made at {at}: make the baseline from an export of {at}")
+    where = lambda d: (_meta(d).get("cpu"), _meta(d).get("platform"))  # noqa: E731
+    if where(base) != where(fresh) or None in where(fresh):
+        raise ValueError(f"--baseline {baseline_path} and the fresh run must come from the same machine; they name "
+                         f"{where(base)} and {where(fresh)}")
+    check = compare_results(base, fresh, rel_tol, abs_tol)
+    table = compare_results(stored, base, rel_tol, abs_tol)
+    check.update({"result": Path(result).name, "result_sha256": file_sha256(result), "fresh": str(fresh_path),
+                  "fresh_commit": _meta(fresh).get("git_commit"), "fresh_date": _meta(fresh).get("date"),
+                  "stored_commit": _meta(stored).get("git_commit"), "cases_total": table["cases_total"],
+                  "baseline": {"path": str(baseline_path), "commit": _meta(base).get("git_commit")},
+                  "chained_from": {k: previous.get(k) for k in ("fresh_commit", "fresh_date", "cases_compared",
+                                                                  "values_compared", "stored_commit", "chained_from")},
+                  "machine": {"cpu": _meta(fresh).get("cpu"), "stored_cpu": _meta(stored).get("cpu"),
+                              "baseline_vs_table_mismatches": table["n_mismatches"],
+                              "baseline_vs_table_max_abs_diff": table["max_abs_diff"]}})
     write_atomic(check_path(result), json.dumps(check, indent=1, default=str) + "\n")
     return check
 

@@ -119,3 +119,46 @@ def test_cli_verify_writes_the_check_and_refuses_bad_input(repo, monkeypatch, ca
     assert "shares no case" in capsys.readouterr().err
     assert main(["report", "--out", str(out), "--verify", f"selfpen={fresh}"]) == 2
     assert "no stored result to compare with" in capsys.readouterr().err
+
+
+def test_chained_check_ties_new_code_to_the_table_through_the_last_agreeing_check(repo, monkeypatch, capsys):
+    """On another machine the table's own code gives other values (here mesh/a 9.0 for 2.0): a fresh run there
+    disagrees with the table whatever the code. --baseline compares the fresh run with a run of the code of the
+    result's last agreeing check made on the same machine: equal values make the result current, named as such;
+    a baseline of other code, from another machine, a fresh run that differs from it, or no agreeing check to
+    chain from, are refused or keep it stale."""
+    root, stored, made, later = repo
+    monkeypatch.setattr(report, "ROOT", root)
+    out = root / "docs" / "report.md"
+    m1 = {"cpu": "AMD EPYC", "platform": "Linux-a"}
+    m2 = {"cpu": "Intel Xeon", "platform": "Linux-b"}
+    run = lambda name, commit, machine, **change: write(  # noqa: E731
+        root / "out" / f"{name}.json", dict(fresh_of("a", **change), meta={"git_commit": commit, **machine}))
+    base = run("base", made, m2, **{"mesh/a": 9.0})
+    fresh = run("fresh", later, m2, **{"mesh/a": 9.0})
+    assert main(["report", "--out", str(out), "--verify", f"hoi={fresh}", "--baseline", f"hoi={base}"]) == 2
+    assert "needs an agreeing re-run check" in capsys.readouterr().err       # nothing to chain from yet
+    write_check(stored, run("first", made, m1))                               # the table's code agreed on its machine
+    assert _verdict(root, stored)[0] == "stale"                               # (made before the change)
+    assert main(["report", "--out", str(out), "--verify", f"hoi={fresh}"]) == 0  # plain check on the new machine
+    assert "differ" in capsys.readouterr().out and _verdict(root, stored)[0] == "stale"
+    write_check(stored, run("first", made, m1))
+    assert main(["report", "--out", str(out), "--verify", f"hoi={fresh}", "--baseline", f"hoi={base}"]) == 0
+    assert "all agree" in capsys.readouterr().out
+    verdict, line = _verdict(root, stored)
+    assert verdict == "current" and f"with the code of {made}" in line and "Intel Xeon" in line
+    check = json.loads(check_path(stored).read_text())
+    assert check["machine"]["baseline_vs_table_mismatches"] == 1 and check["chained_from"]["fresh_commit"] == made
+    # the chained check is itself an agreeing check: a later one chains from it, from its own (fresh) commit
+    err = lambda *a: (main(["report", "--out", str(out), *a]), capsys.readouterr().err)  # noqa: E731
+    rc, msg = err("--verify", f"hoi={fresh}", "--baseline", f"hoi={base}")
+    assert rc == 2 and f"from an export of {later}" in msg
+    write_check(stored, run("first", made, m1))
+    rc, msg = err("--verify", f"hoi={run('fresh1', later, m1, **{'mesh/a': 9.0})}", "--baseline", f"hoi={base}")
+    assert rc == 2 and "same machine" in msg and msg.count("\n") == 1
+    rc, msg = err("--baseline", f"hoi={base}")
+    assert rc == 2 and "needs --verify hoi=" in msg
+    write_check(stored, run("first", made, m1))
+    assert main(["report", "--out", str(out), "--verify", f"hoi={run('fresh2', later, m2, **{'mesh/a': 8.0})}",
+                 "--baseline", f"hoi={base}"]) == 0
+    assert "1 differ" in capsys.readouterr().out and _verdict(root, stored)[0] == "stale"
