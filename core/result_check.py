@@ -17,7 +17,7 @@ Agreement means every compared number within `rel_tol` (relative) or `abs_tol` (
 Another machine (another CPU's float rounding, amplified by an iterative sampler) can make the same code give other
 values than the stored table's, so a fresh run there proves nothing about the code. A chained check (`baseline`)
 compares instead two fresh runs on one machine: the current code against the code of the result's last agreeing
-check (an export of its `fresh_commit`). When they agree, the code change changed nothing, and the earlier check ties
+check (an export of its `fresh_commit`) or of the table itself (its commit). When they agree, the code change changed nothing, and the earlier check ties
 that older code to the table:
 
     volsmpl report --verify egohmr=out/new/results.json --baseline egohmr=out/old/results.json
@@ -143,19 +143,25 @@ def _meta(d: dict) -> dict:
 def chain_check(result: Path, fresh_path: Path, baseline_path: Path, rel_tol: float = 1e-6,
                 abs_tol: float = 1e-9) -> dict:
     """A chained check (module docstring): the fresh run against `baseline_path`, a run on the same machine of the
-    code of the result's current agreeing check; written beside the result like `write_check`'s, with the earlier
+    code of the result's current agreeing check (or of the table itself); written beside the result like `write_check`'s, with the earlier
     check under 'chained_from' and how the baseline differs from the stored table (the machine, not the code) under
     'machine'. ValueError (one line) when there is no agreeing check to chain from, the baseline was made by other
-    code than that check's, or the two runs were made on different machines."""
-    previous = check_for(result)
-    if previous is None or not previous.get("agree"):
-        raise ValueError(f"--baseline needs an agreeing re-run check of {result} to chain from ({check_path(result).name}); "
-                         f"make one with --verify alone on a machine where the table's own code agrees with it")
+    code than that check's (or the table's own), or the two runs were made on different machines. Without an agreeing
+    check the baseline must be a run of the table's own code."""
     stored, fresh, base = (json.loads(Path(p).read_text(encoding="utf-8")) for p in (result, fresh_path, baseline_path))
-    at = previous.get("fresh_commit")
-    if not at or not str(_meta(base).get("git_commit") or "").startswith(str(at)[:7]):
-        raise ValueError(f"--baseline {baseline_path} was made at {_meta(base).get('git_commit')}, but the check to chain "
-                         f"from was made at {at}: make the baseline from an export of {at}")
+    previous = check_for(result)
+    # the code tied to the table: its own commit, and that of its last agreeing check
+    anchors = {"the table itself": {"fresh_commit": _meta(stored).get("git_commit")}}
+    if previous is not None and previous.get("agree"):
+        anchors["its last agreeing check"] = previous
+    made = str(_meta(base).get("git_commit") or "")
+    tie = next(((what, c) for what, c in anchors.items()
+                if c.get("fresh_commit") and made[:7] == str(c["fresh_commit"])[:7]), None)
+    if tie is None:
+        at = " or ".join(f"{c['fresh_commit']} ({what})" for what, c in anchors.items() if c.get("fresh_commit"))
+        raise ValueError(f"--baseline {baseline_path} was made at {made or 'an unrecorded commit'}; the code tied to "
+                         f"{Path(result).name} is {at or 'not recorded'}: make the baseline from an export of it")
+    previous = tie[1]
     where = lambda d: (_meta(d).get("cpu"), _meta(d).get("platform"))  # noqa: E731
     if where(base) != where(fresh) or None in where(fresh):
         raise ValueError(f"--baseline {baseline_path} and the fresh run must come from the same machine; they name "

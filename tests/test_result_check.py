@@ -121,12 +121,12 @@ def test_cli_verify_writes_the_check_and_refuses_bad_input(repo, monkeypatch, ca
     assert "no stored result to compare with" in capsys.readouterr().err
 
 
-def test_chained_check_ties_new_code_to_the_table_through_the_last_agreeing_check(repo, monkeypatch, capsys):
+def test_chained_check_ties_new_code_to_the_table_through_code_checked_on_its_machine(repo, monkeypatch, capsys):
     """On another machine the table's own code gives other values (here mesh/a 9.0 for 2.0): a fresh run there
-    disagrees with the table whatever the code. --baseline compares the fresh run with a run of the code of the
-    result's last agreeing check made on the same machine: equal values make the result current, named as such;
-    a baseline of other code, from another machine, a fresh run that differs from it, or no agreeing check to
-    chain from, are refused or keep it stale."""
+    disagrees with the table whatever the code. --baseline compares the fresh run with a run, on the same machine, of
+    code tied to the table (its own commit, or that of its last agreeing check): equal values make the result
+    current, named as such; a baseline of other code or from another machine is refused in one line, a fresh run
+    that differs from it keeps the result stale."""
     root, stored, made, later = repo
     monkeypatch.setattr(report, "ROOT", root)
     out = root / "docs" / "report.md"
@@ -134,31 +134,27 @@ def test_chained_check_ties_new_code_to_the_table_through_the_last_agreeing_chec
     m2 = {"cpu": "Intel Xeon", "platform": "Linux-b"}
     run = lambda name, commit, machine, **change: write(  # noqa: E731
         root / "out" / f"{name}.json", dict(fresh_of("a", **change), meta={"git_commit": commit, **machine}))
+    cli = lambda *a: (main(["report", "--out", str(out), *a]), capsys.readouterr())  # noqa: E731
     base = run("base", made, m2, **{"mesh/a": 9.0})
     fresh = run("fresh", later, m2, **{"mesh/a": 9.0})
-    assert main(["report", "--out", str(out), "--verify", f"hoi={fresh}", "--baseline", f"hoi={base}"]) == 2
-    assert "needs an agreeing re-run check" in capsys.readouterr().err       # nothing to chain from yet
-    write_check(stored, run("first", made, m1))                               # the table's code agreed on its machine
-    assert _verdict(root, stored)[0] == "stale"                               # (made before the change)
-    assert main(["report", "--out", str(out), "--verify", f"hoi={fresh}"]) == 0  # plain check on the new machine
-    assert "differ" in capsys.readouterr().out and _verdict(root, stored)[0] == "stale"
-    write_check(stored, run("first", made, m1))
-    assert main(["report", "--out", str(out), "--verify", f"hoi={fresh}", "--baseline", f"hoi={base}"]) == 0
-    assert "all agree" in capsys.readouterr().out
+    rc, io = cli("--verify", f"hoi={fresh}")                                   # a plain check on the new machine
+    assert rc == 0 and "1 differ" in io.out and _verdict(root, stored)[0] == "stale"
+    rc, io = cli("--verify", f"hoi={fresh}", "--baseline", f"hoi={run('other', later, m2, **{'mesh/a': 9.0})}")
+    assert rc == 2 and f"the code tied to results.json is {made} (the table itself)" in io.err
+    assert io.err.count("\n") == 1
+    rc, io = cli("--verify", f"hoi={fresh}", "--baseline", f"hoi={base}")     # the table's own code, run here
+    assert rc == 0 and "all agree" in io.out
     verdict, line = _verdict(root, stored)
     assert verdict == "current" and f"with the code of {made}" in line and "Intel Xeon" in line
     check = json.loads(check_path(stored).read_text())
     assert check["machine"]["baseline_vs_table_mismatches"] == 1 and check["chained_from"]["fresh_commit"] == made
-    # the chained check is itself an agreeing check: a later one chains from it, from its own (fresh) commit
-    err = lambda *a: (main(["report", "--out", str(out), *a]), capsys.readouterr().err)  # noqa: E731
-    rc, msg = err("--verify", f"hoi={fresh}", "--baseline", f"hoi={base}")
-    assert rc == 2 and f"from an export of {later}" in msg
-    write_check(stored, run("first", made, m1))
-    rc, msg = err("--verify", f"hoi={run('fresh1', later, m1, **{'mesh/a': 9.0})}", "--baseline", f"hoi={base}")
-    assert rc == 2 and "same machine" in msg and msg.count("\n") == 1
-    rc, msg = err("--baseline", f"hoi={base}")
-    assert rc == 2 and "needs --verify hoi=" in msg
-    write_check(stored, run("first", made, m1))
-    assert main(["report", "--out", str(out), "--verify", f"hoi={run('fresh2', later, m2, **{'mesh/a': 8.0})}",
-                 "--baseline", f"hoi={base}"]) == 0
-    assert "1 differ" in capsys.readouterr().out and _verdict(root, stored)[0] == "stale"
+    # an agreeing check (this chained one, at `later`) ties its own code too
+    rc, io = cli("--verify", f"hoi={fresh}", "--baseline", f"hoi={run('base2', later, m2, **{'mesh/a': 9.0})}")
+    assert rc == 0 and "all agree" in io.out
+    assert json.loads(check_path(stored).read_text())["chained_from"]["fresh_commit"] == later
+    rc, io = cli("--verify", f"hoi={run('fresh1', later, m1, **{'mesh/a': 9.0})}", "--baseline", f"hoi={base}")
+    assert rc == 2 and "same machine" in io.err and io.err.count("\n") == 1
+    rc, io = cli("--baseline", f"hoi={base}")
+    assert rc == 2 and "needs --verify hoi=" in io.err
+    rc, io = cli("--verify", f"hoi={run('fresh2', later, m2, **{'mesh/a': 8.0})}", "--baseline", f"hoi={base}")
+    assert rc == 0 and "1 differ" in io.out and _verdict(root, stored)[0] == "stale"
