@@ -112,6 +112,7 @@ class Partition(torch.nn.Module):
         self.register_buffer("face_labels", torch.as_tensor(flab), persistent=False)
         self.register_buffer("part_joints", torch.as_tensor(self.table.part_joints), persistent=False)
         self.register_buffer("parents", torch.as_tensor(arr["parents"]), persistent=False)
+        self.parent_list = [int(p) for p in arr["parents"]]  # on the host: part_transforms reads no device value
         self.register_buffer("collision_mask", torch.as_tensor(self.table.collision_mask.copy()), persistent=False)
         # every vertex in exactly one part: the vertices sorted by part, and each part's count (`boxes`)
         self.register_buffer("_by_part", torch.as_tensor(np.argsort(vlab, kind="stable")), persistent=False)
@@ -151,7 +152,7 @@ class Partition(torch.nn.Module):
         rot = rodrigues(pose)
         chain = [rot[:, 0]]
         for j in range(1, J):
-            chain.append(chain[int(self.parents[j])] @ rot[:, j])
+            chain.append(chain[self.parent_list[j]] @ rot[:, j])
         glob = torch.stack(chain, dim=1)[:, self.part_joints]
         G = torch.zeros(B, self.num_parts, 4, 4, dtype=glob.dtype, device=glob.device)
         G[..., :3, :3] = glob

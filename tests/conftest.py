@@ -37,6 +37,23 @@ def tiny_config():
                         decoder_hidden=16, nbw_rank=2)
 
 
+@pytest.fixture
+def host_reads(monkeypatch):
+    """Counts, by method name, every read of tensor values to the host (tolist, item, int(), float(), bool(),
+    index use): on a GPU each one waits for the device. Returns the Counter (clear it before the code under test)."""
+    import collections
+
+    reads = collections.Counter()
+    for name in ("tolist", "item", "__int__", "__float__", "__bool__", "__index__"):
+        original = getattr(torch.Tensor, name)
+
+        def counted(self, *a, _name=name, _original=original, **k):
+            reads[_name] += 1
+            return _original(self, *a, **k)
+        monkeypatch.setattr(torch.Tensor, name, counted)
+    return reads
+
+
 def random_pose(B: int, scale: float = 0.4, seed: int = 0, dtype=torch.float32, num_betas: int = 10):
     g = torch.Generator().manual_seed(seed)
     return dict(

@@ -50,23 +50,25 @@ def pose_blend(rot_mats: torch.Tensor, posedirs: torch.Tensor | None) -> torch.T
     return (feat @ posedirs).reshape(B, -1, 3)
 
 
-def rigid_chain(rot_mats: torch.Tensor, joints: torch.Tensor, parents: torch.Tensor):
+def rigid_chain(rot_mats: torch.Tensor, joints: torch.Tensor, parents):
     """Forward kinematics.
 
     Args:
         rot_mats: (B, J, 3, 3) relative rotations; joints: (B, J, 3) rest joint locations;
-        parents: (J,) long, parents[0] = -1.
+        parents: (J,) parent indices, parents[0] = -1: a list of ints (no host read), or a long tensor (read to the
+            host once: on a GPU one wait for the device, where reading each parent waited J - 1 times).
     Returns:
         global_rot: (B, J, 3, 3) rotation of each joint frame in the world;
         posed_joints: (B, J, 3) joint locations after posing (root at its rest location);
         skin_transforms: (B, J, 4, 4) transforms taking rest-pose points to posed points.
     """
     B, J = joints.shape[:2]
+    par = parents.tolist() if isinstance(parents, torch.Tensor) else [int(p) for p in parents]
     rel = joints.clone()
-    rel[:, 1:] = joints[:, 1:] - joints[:, parents[1:]]
+    rel[:, 1:] = joints[:, 1:] - joints[:, par[1:]]
     rots, locs = [rot_mats[:, 0]], [joints[:, 0]]
     for j in range(1, J):
-        p = int(parents[j])
+        p = par[j]
         rots.append(rots[p] @ rot_mats[:, j])
         locs.append(locs[p] + (rots[p] @ rel[:, j, :, None])[..., 0])
     global_rot = torch.stack(rots, dim=1)

@@ -139,6 +139,7 @@ class Body(torch.nn.Module):
         self.register_buffer("J_regressor", torch.as_tensor(arrays["J_regressor"], dtype=f32))
         self.register_buffer("lbs_weights", torch.as_tensor(arrays["weights"], dtype=f32))
         self.register_buffer("parents", torch.as_tensor(parents))
+        self.parent_list = [int(p) for p in parents]  # the same on the host: forward kinematics reads no device value
         self.register_buffer("faces_tensor", torch.as_tensor(self.faces))
         posedirs = arrays["posedirs"].reshape(-1, arrays["posedirs"].shape[-1]).T  # (P, V*3)
         self.has_posedirs = bool(np.any(posedirs))
@@ -206,7 +207,7 @@ class Body(torch.nn.Module):
         rest_joints = torch.einsum("jv,bvc->bjc", self.J_regressor, v_shaped)
         rot_mats = rodrigues(full_pose)
         v_posed = v_shaped + pose_blend(rot_mats, self.posedirs if self.has_posedirs else None)
-        _, posed_joints, skin = rigid_chain(rot_mats, rest_joints, self.parents)
+        _, posed_joints, skin = rigid_chain(rot_mats, rest_joints, self.parent_list)
         vertices = skin_vertices(v_posed, self.lbs_weights, skin) + transl[:, None]
         skin = skin.clone()
         skin[..., :3, 3] = skin[..., :3, 3] + transl[:, None]
