@@ -103,3 +103,39 @@ def test_bad_keys(tmp_path, monkeypatch):
         cached("../escape", 1, 0, lambda: {})
     with pytest.raises(ValueError, match="dict of numpy arrays"):
         cached("x", 1, 0, lambda: [1, 2])
+
+
+def test_code_version_follows_the_generators_source(tmp_path, monkeypatch):
+    """An entry keyed by `code_version` is rebuilt when the generator's source changes (a package: any of its
+    files; a module: its file), and served while it does not; the room cloud is keyed so."""
+    import importlib
+    import sys
+
+    from volsmpl.scene import cache as cache_mod2
+    from volsmpl.scene import rooms
+
+    monkeypatch.setenv("VOLSMPL_CACHE", str(tmp_path / "cache"))
+    pkg = tmp_path / "src" / "gen_pkg_for_test"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "shapes.py").write_text("SIZE = 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "src"))
+    importlib.invalidate_caches()
+    sys.modules.pop("gen_pkg_for_test", None)
+    calls = []
+    build = lambda: calls.append(1) or {"x": np.arange(3)}  # noqa: E731
+    v1 = cache_mod2.code_version(4, "gen_pkg_for_test")
+    assert v1.startswith("4.") and v1 == cache_mod2.code_version(4, "gen_pkg_for_test")
+    cached("gen", v1, 0, build)
+    cached("gen", v1, 0, build)
+    assert len(calls) == 1
+    (pkg / "shapes.py").write_text("SIZE = 2\n")        # the generator's code changes, its number does not
+    cache_mod2.code_version.cache_clear()
+    v2 = cache_mod2.code_version(4, "gen_pkg_for_test")
+    assert v2 != v1
+    cached("gen", v2, 0, build)
+    assert len(calls) == 2 and not cache_path("gen", v1, 0).exists()
+    cache_mod2.code_version.cache_clear()
+    rooms.room_points(1, n=64, oversample=2)
+    made = [p.name for p in (tmp_path / "cache" / "room_points_64_x2").iterdir()]
+    assert made == [f"v{cache_mod2.code_version(rooms.ROOM_VERSION, 'volsmpl.scene')}-s1.npz"]

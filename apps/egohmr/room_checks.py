@@ -23,7 +23,7 @@ import torch
 from volsmpl import deps
 from volsmpl.groundtruth import raycasting_scene
 from volsmpl.mesh_query import MeshQuery
-from volsmpl.scene import cached, make_room, sample_surface
+from volsmpl.scene import cached, code_version, make_room, sample_surface
 
 CLOUD_DENSITY = 1e4  # room_cloud: points per square metre of visible surface (1 per cm²)
 CLOUD_VERSION = 2
@@ -65,7 +65,7 @@ def room_cloud(seed: int) -> np.ndarray:
               & (p[:, 1] >= -1e-6)]
         return {"points": p[np.argsort(p[:, 0], kind="stable")].astype(np.float32)}
 
-    return cached("egohmr_room_cloud", CLOUD_VERSION, int(seed), build)["points"]
+    return cached("egohmr_room_cloud", code_version(CLOUD_VERSION, "volsmpl.scene", __name__), int(seed), build)["points"]
 
 
 _RAY_DIRS = np.random.default_rng(20251124).normal(size=(3, 3))

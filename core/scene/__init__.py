@@ -14,11 +14,12 @@
   torch conversion.
 - `camera`: pinhole cameras on kornia (OpenCV axes): intrinsics from a field of view, look-at extrinsics,
   projection with depth and visibility, back-projection; batched and differentiable.
-- `cache`: the user cache folder for generated data (`cached(name, version, seed, build_fn)`, atomic writes).
+- `cache`: the user cache folder for generated data (`cached(name, version, seed, build_fn)`, atomic writes; versions
+  that carry a digest of the generator's source: `code_version`).
 
 Rendering of scenes (several meshes, dots, camera views with keypoints) is in `volsmpl.render`.
 """
-from .cache import cache_dir, cache_path, cached
+from .cache import cache_dir, cache_path, cached, code_version
 from .camera import (camera_center, camera_to_world, intrinsics_from_fov, look_at, make_camera, orbit_eye, project,
                      unproject, world_to_camera)
 from .objects import (CATEGORIES, HANDHELD, REGIONS, SITTABLE, SIZE_PRIOR, SYMMETRY, ObjectTemplate, make_object,
@@ -28,7 +29,7 @@ from .room import GRID_CELL, Item, Room, Seat, Surface
 from .rooms import ROOM_COUNT, ROOM_KINDS, ROOM_VERSION, make_room, room_points
 
 __all__ = [
-    "cache_dir", "cache_path", "cached",
+    "cache_dir", "cache_path", "cached", "code_version",
     "camera_center", "camera_to_world", "intrinsics_from_fov", "look_at", "make_camera", "orbit_eye", "project",
     "unproject", "world_to_camera",
     "CATEGORIES", "HANDHELD", "REGIONS", "SITTABLE", "SIZE_PRIOR", "SYMMETRY", "ObjectTemplate", "make_object",

@@ -3,12 +3,16 @@
 Folder: `$VOLSMPL_CACHE`, else `$XDG_CACHE_HOME/volsmpl`, else `~/.cache/volsmpl` (never inside the repository:
 nothing generated is committed). An entry is keyed by a name, the generator's version and the seed:
 `<folder>/<name>/v<version>-s<seed>.npz` (a dict of arrays, exact) or `.ply` (a trimesh mesh, binary PLY with
-float32 vertices). Bump the version when the generator changes: the entry is rebuilt and older versions of the
-same name and seed are removed. Files are written atomically (a temporary file in the same folder, then
+float32 vertices). A version made by `code_version(n, "volsmpl.scene", ...)` carries a digest of the generator's
+source, so an entry made by other generator code is rebuilt, never served (a hand-bumped number alone is easily
+forgotten); on a new version the entry is rebuilt and older versions of the same name and seed are removed. Files are written atomically (a temporary file in the same folder, then
 `os.replace`), so a reader never sees half a file, and an unreadable entry is rebuilt.
 """
 from __future__ import annotations
 
+import functools
+import hashlib
+import importlib
 import os
 import re
 import tempfile
@@ -28,6 +32,23 @@ def cache_dir() -> Path:
     if os.environ.get("XDG_CACHE_HOME"):
         return Path(os.environ["XDG_CACHE_HOME"]).expanduser() / "volsmpl"
     return Path.home() / ".cache" / "volsmpl"
+
+
+@functools.lru_cache(maxsize=None)
+def code_version(version, *modules: str) -> str:
+    """`version` and a digest of the generator's source: `modules` are module names, a package standing for all
+    its .py files (read when this process first asks: files edited during a run do not change its entries' keys).
+
+    Example:
+        >>> cached("room_points_16384_x4", code_version(1, "volsmpl.scene"), 7, build)   # '1.<12 hex digits>'
+    """
+    h = hashlib.sha256()
+    for name in modules:
+        f = Path(importlib.import_module(name).__file__).resolve()
+        files = sorted(f.parent.rglob("*.py")) if f.name == "__init__.py" else [f]
+        for x in files:
+            h.update(name.encode() + b"\0" + str(x.relative_to(f.parent)).encode() + b"\0" + x.read_bytes())
+    return f"{version}.{h.hexdigest()[:12]}"
 
 
 def cache_path(name: str, version, seed, suffix: str = ".npz") -> Path:

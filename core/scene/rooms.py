@@ -50,7 +50,8 @@ def room_points(seed: int, n: int = 16384, oversample: int = 4, cache: bool = Tr
 
     Samples n * oversample area-uniform points on the surfaces one can see from inside (floor top, walls' inner
     faces, furniture; not the undersides resting on the floor, wall corners or walls below the floor), then keeps n by
-    farthest-point sampling (open3d). Cached in the user cache (cache.py) by ROOM_VERSION and seed.
+    farthest-point sampling (open3d). Cached in the user cache (cache.py) by ROOM_VERSION, the source of the
+    generator (`code_version` of volsmpl.scene) and seed.
 
     Returns: {'points': (n, 3) float32, 'normals': (n, 3) float32, 'labels': (n,) int32 (item index, -1 floor,
     -2 walls)}.
@@ -58,7 +59,7 @@ def room_points(seed: int, n: int = 16384, oversample: int = 4, cache: bool = Tr
     Example:
         >>> cloud = room_points(0)["points"]  # (16384, 3)
     """
-    from .cache import cached
+    from .cache import cached, code_version
     from .points import farthest_point_sample, sample_surface
 
     def build():
@@ -81,4 +82,4 @@ def room_points(seed: int, n: int = 16384, oversample: int = 4, cache: bool = Tr
 
     if not cache:
         return build()
-    return cached(f"room_points_{n}_x{oversample}", ROOM_VERSION, seed, build)
+    return cached(f"room_points_{n}_x{oversample}", code_version(ROOM_VERSION, "volsmpl.scene"), seed, build)
