@@ -46,7 +46,7 @@ checks)
     cp "$W"/*.log "$OUT"/ 2>/dev/null
     tar czf "$OUT/checks.tgz" -C "$W" . ;;
 bench)  # each (model, batch) runs in a fresh process (~20 s with CUDA start and profiling): keep the set small
-    step bench_cuda 330 $V bench --device cuda --models volsmpl,volsmpl-bf16,volsmpl-tf32,volsmpl-dense,coap --batch 1 8 --points 60000 \
+    step bench_cuda 330 $V bench --device cuda --models volsmpl,volsmpl-onechunk,volsmpl-bf16,volsmpl-tf32,volsmpl-dense,coap --batch 1 8 --points 60000 \
         --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
     cp "$W/bench_cuda.log" "$OUT"/ ;;
 apps)  # the interaction database is built on the CPU side of that machine first (no open3d needed)
