@@ -229,8 +229,10 @@ def selfpen_section(ctx) -> list[str]:
                 "triangle collisions after repair (pose-induced pairs; the paper counts PROX meshes)."]
     out += paper_mismatch(d, "6")
     if isinstance(tune, dict):
+        best = tune.get("best") or {}
+        ran = {k: (d.get("config") or {}).get(k) for k in best}
         out += ["", f"Tuning run: {len(tune.get('rows') or [])} settings over {len(tune.get('cases') or [])} cases; "
-                    f"best {tune.get('best')}."]
+                    f"best {best}" + ("." if ran == best else f"; the table above ran {ran} (its preset).")]
     return out
 
 
