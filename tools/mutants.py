@@ -76,6 +76,19 @@ MUTANTS = {
                                              [T + "test_train.py::test_cli_resume_and_init_take_the_checkpoints_training_config"]),
     "float64_body_float32_volume": ("core/attach.py", "return dtype if dtype is not None and dtype.is_floating_point else None",
                                     "return None", [T + "test_volume.py::test_attach_to_a_float64_body_gives_a_float64_volume"]),
+    # fixed in the ninth session (2026-11-26)
+    "job_key_abbreviated_arrays": ("core/case_store.py", "separators=(\",\", \":\"), default=_exact)", "separators=(\",\", \":\"), default=str)",
+                                   [T + "test_case_store.py::test_key_sees_every_element_of_large_arrays"]),
+    "room_cache_by_number_only": ("core/scene/rooms.py", 'code_version(ROOM_VERSION, "volsmpl.scene")', "ROOM_VERSION",
+                                  [T + "test_scene_cache.py::test_code_version_follows_the_generators_source"]),
+    "kinematics_reads_parents_from_device": ("core/partition.py", "chain.append(chain[self.parent_list[j]] @ rot[:, j])",
+                                             "chain.append(chain[int(self.parents[j])] @ rot[:, j])",
+                                             [T + "test_volume.py::test_posing_and_encoding_read_no_device_values"]),
+    "decoder_counts_groups_again": ("core/volume.py", "vals = self._decode_xin(enc, xin, b + b0, kc, counts_host)",
+                                    "vals = self._decode_xin(enc, xin, b + b0, kc)",
+                                    [T + "test_volume.py::test_lean_query_makes_one_host_sync_per_chunk"]),
+    "meter_peak_from_missing_rss": ("core/meter.py", "            elif rss_bytes() < 0:", "            elif False:",
+                                    [T + "test_meter.py::test_cpu_meter_without_proc_reports_the_rise_of_ru_maxrss"]),
 }
 
 
