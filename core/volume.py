@@ -21,7 +21,6 @@ from __future__ import annotations
 import torch
 from torch.profiler import record_function
 
-from .body_view import select_body
 from .boxes import inside_boxes, near_boxes, part_normalization
 from .collision import reduce_penetration
 from .encoding import Encoding, EncodingCache
@@ -460,28 +459,10 @@ class Volume(EncodingCache, BodyVolume):
 
     @torch.no_grad()
     def extract_mesh(self, out, resolution: int = 128, body_index: int = 0, padding: float = 0.05):
-        """Marching cubes of the learned SDF's zero level set of one body, as a trimesh.Trimesh."""
-        import trimesh
-        from skimage.measure import marching_cubes
-
-        from .extract_args import check_extract_args
-        resolution, body_index, padding = check_extract_args(out, resolution, body_index, padding)
-        v = out.vertices[body_index].detach()
-        lo, hi = v.amin(0) - padding, v.amax(0) + padding
-        axes = [torch.linspace(float(lo[i]), float(hi[i]), resolution, dtype=v.dtype, device=v.device) for i in range(3)]
-        grid = torch.stack(torch.meshgrid(*axes, indexing="ij"), dim=-1).reshape(-1, 3)
-        sub = select_body(out, body_index)
-        field = self.query(sub, grid[None])[0].reshape(resolution, resolution, resolution).cpu().numpy()
-        if self.is_sdf:
-            field = -field  # positive inside, like occupancy
-        level = -self.level if self.is_sdf else self.level
-        if not (field.min() < level < field.max()):
-            raise RuntimeError("the field has no level-set crossing in the body's box: the model is untrained or broken.")
-        spacing = ((hi - lo) / (resolution - 1)).cpu().numpy()
-        verts, faces, _, _ = marching_cubes(field, level=level, spacing=tuple(spacing))
-        # skimage winds triangles outward when the field grows inward only after a flip
-        return trimesh.Trimesh(verts + lo.cpu().numpy(), faces[:, ::-1], process=False)
-
+        """Marching cubes of the learned SDF's zero level set of one body, as a trimesh.Trimesh
+        (volsmpl.mesh_extraction.level_set_mesh)."""
+        from .mesh_extraction import level_set_mesh
+        return level_set_mesh(self, out, resolution, body_index, padding)
 
 def _assemble(parts: list, chunks: list, B: int, N: int) -> torch.Tensor:
     """Put the (b1 - b0, e - s) results of the chunks (b0, b1, s, e) of a (B, N) query together (differentiably)."""
