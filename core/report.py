@@ -429,8 +429,9 @@ def run(args) -> int:
     if not (args.verify_tol >= 0):
         raise ValueError(f"--verify-tol must be >= 0, got {args.verify_tol}")
     verify, baselines = (parse_overrides(a, flag=f) for a, f in ((args.verify, "--verify"), (args.baseline, "--baseline")))
-    for name in set(baselines) - set(verify):
-        raise ValueError(f"--baseline {name}=... needs --verify {name}=... (the fresh run to compare with it)")
+    unpaired = sorted(set(baselines) - set(verify))
+    if unpaired:
+        raise ValueError(f"--baseline {unpaired[0]}=... needs --verify {unpaired[0]}=... (the fresh run to compare with it)")
     for name, fresh in verify.items():
         sec = next(sec for sec in SECTIONS.values() if name in sec.results)
         stored = overrides.get(name) or _locate(sec.results[name], ROOT)
