@@ -36,5 +36,10 @@ def check_points(points, like: torch.Tensor, finite: bool = True) -> torch.Tenso
         return points
     bad = ~torch.isfinite(given).all(dim=-1)
     if bad.any():
-        raise ValueError(f"points contain NaN or Inf ({int(bad.sum())} of {bad.numel()} points); remove or fix them before querying.")
+        raise nonfinite_points_error(int(bad.sum()), bad.numel())
     return points
+
+
+def nonfinite_points_error(n_bad: int, n_points: int) -> ValueError:
+    """The error for query points with NaN or Inf: n_bad of the caller's n_points points."""
+    return ValueError(f"points contain NaN or Inf ({n_bad} of {n_points} points); remove or fix them before querying.")

@@ -30,8 +30,9 @@ from .nn.nbw import group_counts
 from .nn.volsmpl_net import PartCode
 from .partition import Partition
 from .precision import check_precision, matmul_precision
+from .query_chunks import assemble_chunks, lean_chunks, point_ranges
 from .self_penetration import SELFPEN_TAU, overlap_samples, reduce_selfpen, sdf_penalty
-from .validate import check_points
+from .validate import check_points, nonfinite_points_error
 from .volume_api import BodyVolume, check_output
 
 #: profiler scope of the decoder evaluations of a query (volsmpl bench times the decoder alone by it)
@@ -45,10 +46,11 @@ class Volume(EncodingCache, BodyVolume):
         net: the network (VolumetricSMPLNet, or CoapNet for the occupancy baseline).
         dense: evaluate every part decoder on every point (reference path) instead of only the
             (point, part) pairs inside part boxes (default, same values and gradients).
-        chunk_elems: memory budget of one query chunk in (body, part, point) entries (every path; on the CPU the
-            lean path also stops at cpu_chunk_elems). Peak bytes per entry of one no-grad chunk, measured on the
-            CPU at 60k points (2026-11-26): ~50 on 'chunked', ~100 on 'lean' where most points are in no box
-            (their box distances), less where most are in a box.
+        chunk_elems: memory budget of one query chunk in (body, part, point) entries: of the dense and 'chunked'
+            paths, and of the lean path on the CPU, which also stops at cpu_chunk_elems; the lean path on other
+            devices takes gpu_chunk_elems instead (GPU_CHUNK_ELEMS). Peak bytes per entry of one no-grad chunk,
+            measured on the CPU at 60k points (2026-11-26): ~50 on 'chunked', ~100 on 'lean' where most points are
+            in no box (their box distances), less where most are in a box; ~70 on 'lean' on an H100.
         engine: the sparse query path: 'lean' (default: `query` culls by boxes, runs the decoders on the pairs
             inside, takes their minimum by one scatter and computes box distances only for the points in no box,
             with one host sync) or 'chunked' (the engine before issue 28: every part's box distance at every
@@ -77,6 +79,7 @@ class Volume(EncodingCache, BodyVolume):
         self.dense = dense
         self.chunk_elems = int(chunk_elems)
         self.cpu_chunk_elems = self.CPU_CHUNK_ELEMS
+        self.gpu_chunk_elems = self.GPU_CHUNK_ELEMS
         if engine not in self.ENGINES:
             raise ValueError(f"engine must be one of {self.ENGINES}, got {engine!r}")
         if pair_decoder not in self.PAIR_DECODERS:
@@ -232,7 +235,8 @@ class Volume(EncodingCache, BodyVolume):
             vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped, torch.bfloat16 if bf16 else None)
             return torch.empty_like(vals).index_put_((order,), vals)
 
-    def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0, outside: bool = True) -> torch.Tensor:
+    def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0, outside: bool = True,
+                    nonfinite=None) -> torch.Tensor:
         """`query` values of an SDF model on the lean sparse path, for bodies b0 .. b0 + B of the encoding.
         points (B, N, 3) -> (B, N).
 
@@ -244,7 +248,8 @@ class Volume(EncodingCache, BodyVolume):
         the coordinates of the pairs (and of the points in no box) are formed again from R_k, t_k and the box, so
         the backward pass touches those only. One host sync (the pairs per (body, part) and the points in no box;
         the decoders get the former, so they make none), then fixed-size nonzero. Same values as `_part_values` +
-        minimum (the dense reference) up to rounding."""
+        minimum (the dense reference) up to rounding. nonfinite: (device count of NaN/Inf points, points given),
+        read with the pairs: a non-zero count raises validate's error."""
         B, N = points.shape[:2]
         K = self.num_parts
         G, box_min, box_max = (x[b0:b0 + B] for x in (enc.G, enc.box_min, enc.box_max))
@@ -267,7 +272,10 @@ class Volume(EncodingCache, BodyVolume):
         per_group = inside.sum(dim=1)                                         # (B, K) pairs per (body, part)
         if enc.slot is not None:
             per_group = per_group[:, enc.parts]                               # in the code's part order
-        host = torch.cat([per_group.reshape(-1), n_free_t.reshape(1)]).tolist()   # the query's one host sync
+        extra = [] if nonfinite is None else [nonfinite[0].reshape(1)]
+        host = torch.cat([per_group.reshape(-1), n_free_t.reshape(1)] + extra).tolist()   # the query's one host sync
+        if nonfinite is not None and host.pop():
+            raise nonfinite_points_error(int(nonfinite[0]), int(nonfinite[1]))
         n_free, n_pairs = host.pop(), sum(host)
         Kc = per_group.shape[1]                                               # groups of the whole encoding:
         counts_host = [0] * (b0 * Kc) + host + [0] * ((enc.G.shape[0] - b0 - B) * Kc)
@@ -310,23 +318,23 @@ class Volume(EncodingCache, BodyVolume):
     #: at 60k points, 2 bodies per chunk cost 1.5x per body what 1 body per chunk costs (B = 8, 1 thread, 2026-11-25);
     #: the default of `cpu_chunk_elems` (bench model 'volsmpl-onechunk' measures one chunk for the whole batch)
     CPU_CHUNK_ELEMS = 1 << 20
+    #: on other devices (GPUs) a lean chunk holds at most this many entries (~1.1 GiB at ~70 B each): at 60k points
+    #: B = 8 runs in one chunk, 2.6x faster than in four of 2 bodies on an H100 (docs/bench_cuda.md, 2026-11-26,
+    #: where the first one-chunk row is 'volsmpl-onechunk'); the default of `gpu_chunk_elems`
+    GPU_CHUNK_ELEMS = 1 << 24
 
     def _lean_chunks(self, B: int, N: int, device=None) -> list:
         """Chunks (b0, b1, s, e) of the lean query on `device`: whole bodies while a chunk's (body, part, point)
-        entries stay within chunk_elems (on the CPU also within cpu_chunk_elems, so that each body's work runs as
-        at B = 1, in cache), else point ranges of one body."""
-        per_body = self.num_parts * max(1, N)
-        budget = self.chunk_elems
-        if device is not None and torch.device(device).type == "cpu":
-            budget = min(budget, self.cpu_chunk_elems)
-        if per_body <= budget:
-            nb = max(1, budget // per_body)
-            return [(b, min(B, b + nb), 0, N) for b in range(0, B, nb)]
-        return [(b, b + 1, s, e) for b in range(B) for s, e in self._chunks(1, N)]
+        entries stay within the budget (on the CPU chunk_elems and cpu_chunk_elems, so that each body's work runs
+        as at B = 1, in cache; elsewhere gpu_chunk_elems: launches, not caches, set a GPU's cost), else point
+        ranges of one body."""
+        cpu = device is None or torch.device(device).type == "cpu"
+        budget = min(self.chunk_elems, self.cpu_chunk_elems) if cpu else self.gpu_chunk_elems
+        step = max(1024, (self.chunk_elems if cpu else budget) // self.num_parts)   # the CPU's as `_chunks(1, N)`
+        return lean_chunks(B, N, self.num_parts, budget, step)
 
     def _chunks(self, B: int, N: int, factor: int = 1):
-        step = max(1024, factor * self.chunk_elems // max(1, B * self.num_parts))
-        return [(s, min(N, s + step)) for s in range(0, N, step)]
+        return point_ranges(N, max(1024, factor * self.chunk_elems // max(1, B * self.num_parts)))
 
     # ------------------------------------------------------------------ public queries
     def query_parts(self, out, points: torch.Tensor, dense: bool | None = None) -> torch.Tensor:
@@ -353,8 +361,18 @@ class Volume(EncodingCache, BodyVolume):
         Returns: (B, N); an empty (B, 0) for N = 0.
         """
         check_output(out)
-        points = check_points(points, out.vertices)
-        return self.query_encoded(self._encoding_for(out, points), points, dense)
+        dense = self.dense if dense is None else dense
+        if not self._lean(dense):
+            points = check_points(points, out.vertices)
+            return self.query_encoded(self._encoding_for(out, points), points, dense)
+        given = points       # NaN and Inf are counted in the lean query's one host read: no wait of its own
+        points = check_points(points, out.vertices, finite=False)
+        bad = (~torch.isfinite(given)).any(dim=-1).sum()
+        return self._query(self._encoding_for(out, points), points, dense, True, (bad, given.shape[:-1].numel()))
+
+    def _lean(self, dense: bool) -> bool:
+        """Whether a query runs on the lean sparse path (SDF models, sparse, engine 'lean')."""
+        return self.is_sdf and not dense and self.engine == "lean"
 
     def query_encoded(self, enc: Encoding, points: torch.Tensor, dense: bool | None = None,
                       outside: bool = True) -> torch.Tensor:
@@ -363,13 +381,18 @@ class Volume(EncodingCache, BodyVolume):
         skipped); `query` ensures it. outside=False may answer +inf instead of the box distance at points in no
         padded part box (the lean path skips those distances; see collision_loss). points may be (N, 3) (every
         body); NaN or Inf points are not checked here (no host sync): their values are NaN."""
+        return self._query(enc, points, self.dense if dense is None else dense, outside, None)
+
+    def _query(self, enc: Encoding, points: torch.Tensor, dense: bool, outside: bool, nonfinite) -> torch.Tensor:
+        """query_encoded; nonfinite: None, or (count of NaN/Inf points as a device tensor, points given) for the
+        lean path to read with its pairs and refuse (`query`)."""
         points = check_points(points, enc.G, finite=False)  # (1, N, 3) for B > 1 bodies: refused (not body 0 alone)
-        dense = self.dense if dense is None else dense
         B, N = points.shape[:2]
-        if self.is_sdf and not dense and self.engine == "lean":
+        if self._lean(dense):
             chunks = self._lean_chunks(B, N, points.device)
-            res = [self._query_lean(enc, points[b0:b1, s:e], b0, outside) for b0, b1, s, e in chunks]
-            return res[0] if len(res) == 1 else _assemble(res, chunks, B, N)
+            res = [self._query_lean(enc, points[b0:b1, s:e], b0, outside, nonfinite if i == 0 else None)
+                   for i, (b0, b1, s, e) in enumerate(chunks)]
+            return res[0] if len(res) == 1 else assemble_chunks(res, chunks, B, N)
         res = []
         for s, e in self._chunks(B, N):
             part, inside = self._part_values(enc, points[:, s:e], dense)
@@ -463,20 +486,3 @@ class Volume(EncodingCache, BodyVolume):
         (volsmpl.mesh_extraction.level_set_mesh)."""
         from .mesh_extraction import level_set_mesh
         return level_set_mesh(self, out, resolution, body_index, padding)
-
-def _assemble(parts: list, chunks: list, B: int, N: int) -> torch.Tensor:
-    """Put the (b1 - b0, e - s) results of the chunks (b0, b1, s, e) of a (B, N) query together (differentiably)."""
-    rows = []
-    i = 0
-    while i < len(chunks):
-        b0, b1, s, e = chunks[i]
-        if s == 0 and e == N:
-            rows.append(parts[i])
-            i += 1
-            continue
-        j = i
-        while j < len(chunks) and chunks[j][0] == b0:
-            j += 1
-        rows.append(torch.cat(parts[i:j], dim=1))
-        i = j
-    return torch.cat(rows, dim=0)

@@ -159,3 +159,26 @@ def test_missing_and_malformed_files(tmp_path):
     np.savez(tmp_path / "nan.npz", **nan)
     with pytest.raises(ValueError, match="NaN"):
         Body(tmp_path / "nan.npz")
+
+
+def test_kinematic_levels_compose_the_chain_joint_by_joint(body):
+    """Forward kinematics by depth equals the chain composed joint by joint in index order (SMPL's parents[j] < j):
+    world rotations and posed joints, on a random pose and on a tree given out of order."""
+    from volsmpl.body.lbs import chain_rotations, kinematic_levels, rigid_chain, rodrigues
+
+    rot = rodrigues(torch.randn(3, 72, dtype=torch.float64, generator=torch.Generator().manual_seed(2)) * 0.5)
+    rest = torch.randn(3, 24, 3, dtype=torch.float64, generator=torch.Generator().manual_seed(3))
+    par = body.parent_list
+    ref_r, ref_j = [rot[:, 0]], [rest[:, 0]]
+    for j in range(1, 24):
+        p = par[j]
+        ref_r.append(ref_r[p] @ rot[:, j])
+        ref_j.append(ref_j[p] + (ref_r[p] @ (rest[:, j] - rest[:, p])[..., None])[..., 0])
+    glob, posed, skin = rigid_chain(rot, rest, par)
+    assert torch.allclose(glob, torch.stack(ref_r, 1), atol=1e-12)
+    assert torch.allclose(posed, torch.stack(ref_j, 1), atol=1e-12)
+    assert torch.allclose(chain_rotations(rot, kinematic_levels(par)), glob, atol=1e-12)
+    order, parent, sizes = kinematic_levels([2, -1, 1, 0])       # 1 -> 2 -> 0 -> 3: depths 0, 1, 2, 3
+    assert order.tolist() == [2, 0, 3] and parent.tolist() == [1, 2, 0] and sizes == [1, 1, 1]
+    with pytest.raises(ValueError, match="do not form a tree"):
+        kinematic_levels([-1, 2, 1])

@@ -58,10 +58,11 @@ def test_canonicalize_roundtrip(body, part):
     assert torch.allclose(jl[:, idx, idx], torch.zeros(2, part.num_parts, 3), atol=1e-5)
 
 
-def test_boxes_contain_part_vertices(body, part):
+@pytest.mark.parametrize("method", ["loop", "scatter"])
+def test_boxes_contain_part_vertices(body, part, method):
     out = body(**random_pose(2, scale=0.6, seed=6))
     G = part.part_transforms(out.full_pose, out.joints)
-    bmin, bmax = part.boxes(out.vertices, G)
+    bmin, bmax = part.boxes(out.vertices, G, method=method)
     local = Partition.canonicalize(out.vertices, G)  # (B, K, V, 3)
     for k in range(part.num_parts):
         sel = part.vertex_labels == k
@@ -136,6 +137,44 @@ def test_differentiable(body, part):
     (bmin.sum() + bmax.sum() + part.surface_points(out.vertices).sum() + G.sum()).backward()
     for k in ("betas", "body_pose", "transl"):
         assert p[k].grad is not None and p[k].grad.abs().sum() > 0, k
+
+
+@pytest.mark.parametrize("method", ["loop", "scatter"])
+def test_box_gradients_match_finite_differences(body, part, method):
+    """Each box bound is one vertex's coordinate in its part's frame: the analytic gradient with respect to the
+    vertices and the frames equals central differences (float64; a pose without ties)."""
+    out = body(**random_pose(2, scale=0.5, seed=12))
+    G = part.part_transforms(out.full_pose, out.joints).detach().double()
+    v = out.vertices.detach().double()
+    w = torch.randn(2, part.num_parts, 3, 2, dtype=torch.float64, generator=torch.Generator().manual_seed(1))
+
+    def f(v, t):
+        Gt = G.clone()
+        Gt[..., :3, 3] = t
+        lo, hi = part.boxes(v, Gt, method=method)
+        return (w[..., 0] * lo).sum() + (w[..., 1] * hi).sum()
+
+    v.requires_grad_()
+    t = G[..., :3, 3].clone().requires_grad_()
+    gv, gt = torch.autograd.grad(f(v, t), (v, t))
+    eps = 1e-6
+    with torch.no_grad():
+        for i, j, c in [(0, 5, 0), (1, 4000, 2), (0, 13000, 1)]:
+            d = torch.zeros_like(v)
+            d[i, j, c] = eps
+            fd = (f(v + d, t) - f(v - d, t)) / (2 * eps)
+            assert abs(fd - gv[i, j, c]) < 1e-6, (i, j, c, float(fd), float(gv[i, j, c]))
+        for i, k, c in [(0, 3, 0), (1, 10, 2)]:
+            d = torch.zeros_like(t)
+            d[i, k, c] = eps
+            fd = (f(v, t + d) - f(v, t - d)) / (2 * eps)
+            assert abs(fd - gt[i, k, c]) < 1e-6, (i, k, c, float(fd), float(gt[i, k, c]))
+
+
+def test_box_method_is_checked(body, part):
+    out = body()
+    with pytest.raises(ValueError, match="'loop' or 'scatter'"):
+        part.boxes(out.vertices, part.part_transforms(out.full_pose, out.joints), method="padded")
 
 
 def test_unsupported_bodies(body):

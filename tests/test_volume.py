@@ -422,14 +422,33 @@ def test_lean_query_makes_one_host_sync_per_chunk(vbody, monkeypatch, host_reads
                 assert dict(reads) == {"tolist": n_chunks}, (grad, n_chunks, dict(reads))
 
 
+def test_query_reads_the_device_once_per_check(vbody, host_reads):
+    """`query` on a cached encoding reads device values to the host (a wait each on a GPU) once for the cache's
+    fingerprint (outputs and weights together; it was two) and once in the lean path, whose read also counts NaN
+    and Inf points (a read of its own before); a subset encoding adds the check that it has every part needed.
+    NaN points are still refused, with their count."""
+    vol = vbody.volume
+    out = vbody(**random_pose(2, seed=23))
+    pts = _near_points(out, 300, seed=23)
+    vol.encode(out)                                 # the whole encoding, cached
+    host_reads.clear()
+    vol.query(out, pts)
+    assert dict(host_reads) == {"tolist": 2}, dict(host_reads)
+    bad = pts.clone()
+    bad[1, 7, 2] = float("inf")
+    with pytest.raises(ValueError, match=r"NaN or Inf \(1 of 600 points\)"):
+        vol.query(out, bad)
+
+
 def test_posing_and_encoding_read_no_device_values(vbody, host_reads):
     """Forward kinematics (the body's and the part frames') walked the kinematic tree by reading each parent index
     from a tensor: 23 host reads per body forward and per encoding, each a wait for the device on a GPU. With the
-    tree on the host: none in an encoding, and in a forward only the check that the given parameters are finite."""
+    tree on the host: none in an encoding, and in a forward one, the check that the given parameters are finite
+    (one read for all of them: it was one per parameter)."""
     p = random_pose(2, seed=22)
     host_reads.clear()
     out = vbody(**p)
-    assert dict(host_reads) == {"__bool__": len(p)}, dict(host_reads)
+    assert dict(host_reads) == {"tolist": 1}, dict(host_reads)
     host_reads.clear()
     vbody.volume.encode(out, fresh=True)
     assert dict(host_reads) == {}, dict(host_reads)
@@ -437,13 +456,15 @@ def test_posing_and_encoding_read_no_device_values(vbody, host_reads):
 
 def test_lean_chunks_one_body_per_chunk_on_the_cpu(vbody):
     """At the benchmark's 60k points a lean chunk on the CPU holds one body (its arrays stay in cache: per-body time at
-    B = 8 as at B = 1), on other devices as many whole bodies as chunk_elems allows; small queries still batch
-    bodies; every (body, point) is covered exactly once."""
+    B = 8 as at B = 1), on other devices as many whole bodies as gpu_chunk_elems allows (B = 8 in one chunk, B = 32
+    in two), whatever chunk_elems; small queries still batch bodies; every (body, point) is covered exactly once."""
     vol = vbody.volume
     K = vol.num_parts
     cpu, gpu = vol._lean_chunks(8, 60000, "cpu"), vol._lean_chunks(8, 60000, "cuda")
     assert cpu == [(b, b + 1, 0, 60000) for b in range(8)]
-    assert [c[1] - c[0] for c in gpu] == [vol.chunk_elems // (60000 * K)] * len(gpu) and len(gpu) < 8
+    assert gpu == [(0, 8, 0, 60000)] and [c[:2] for c in vol._lean_chunks(32, 60000, "cuda")] == [(0, 17), (17, 32)]
+    huge = vol._lean_chunks(2, vol.gpu_chunk_elems // K + 5, "cuda")   # one body over the budget: point ranges
+    assert [c[1] - c[0] for c in huge] == [1] * 4 and all(c[3] - c[2] <= vol.gpu_chunk_elems // K for c in huge)
     small = vol._lean_chunks(64, 1000, "cpu")
     assert len(small) < 64 and sum(b1 - b0 for b0, b1, _, _ in small) == 64
     big = vol._lean_chunks(2, 200000, "cpu")

@@ -58,7 +58,7 @@ def pose_joints(body, betas: torch.Tensor, x: torch.Tensor, pelvis: torch.Tensor
     Shape: betas (B, 10), x (B, 144), pelvis (B, 3) -> (B, 24, 3). `rest`: the rest joints when known.
     """
     rest = rest_joints(body, betas) if rest is None else rest
-    _, joints, _ = rigid_chain(rotation_matrices(x), rest, body.parents)
+    _, joints, _ = rigid_chain(rotation_matrices(x), rest, body.parent_list, body.chain_levels)
     return joints - joints[:, :1] + pelvis[:, None]
 
 

@@ -50,36 +50,80 @@ def pose_blend(rot_mats: torch.Tensor, posedirs: torch.Tensor | None) -> torch.T
     return (feat @ posedirs).reshape(B, -1, 3)
 
 
-def rigid_chain(rot_mats: torch.Tensor, joints: torch.Tensor, parents):
+def kinematic_levels(parents) -> tuple[torch.Tensor, torch.Tensor, list[int]]:
+    """The non-root joints ordered by depth in the kinematic tree, for forward kinematics by depth.
+
+    Every parent of a joint at depth d lies at depth d - 1, so one batched product per depth composes the chain
+    (8 on SMPL's tree, against 23 joint by joint). Register `order` and `parent` as buffers of the module that
+    poses, so that they sit on its device (a host index on a GPU costs a copy and a wait each call).
+
+    Args: parents: (J,) parent indices, -1 for a root (a list of ints or a long tensor).
+    Returns: order (J - r,) long: the joints with a parent, depth 1 first; parent (J - r,) long: their parents;
+        sizes: the number of joints at each depth 1, 2, ... (host ints: `order.split(sizes)`).
+    Example:
+        >>> kinematic_levels([-1, 0, 0, 1])
+        (tensor([1, 2, 3]), tensor([0, 0, 1]), [2, 1])
+    """
+    par = parents.tolist() if isinstance(parents, torch.Tensor) else [int(p) for p in parents]
+    depth = [0 if p < 0 else -1 for p in par]
+    for _ in range(len(par)):
+        todo = [j for j, p in enumerate(par) if depth[j] < 0 and depth[p] >= 0]
+        if not todo:
+            break
+        for j in todo:
+            depth[j] = depth[par[j]] + 1
+    if min(depth, default=0) < 0:
+        raise ValueError(f"parents {par} do not form a tree: joints {[j for j, d in enumerate(depth) if d < 0]} "
+                         f"have no path to a root (parent -1).")
+    order = sorted((j for j in range(len(par)) if par[j] >= 0), key=lambda j: (depth[j], j))
+    sizes = [sum(1 for j in order if depth[j] == d) for d in range(1, max(depth, default=0) + 1)]
+    return (torch.tensor(order, dtype=torch.long), torch.tensor([par[j] for j in order], dtype=torch.long), sizes)
+
+
+def _depths(levels, device):
+    """(joints, parents) index pairs of each depth of `levels` (kinematic_levels' triple), on `device`."""
+    order, parent, sizes = levels
+    return zip(order.to(device).split(sizes), parent.to(device).split(sizes))
+
+
+def chain_rotations(rot_mats: torch.Tensor, levels) -> torch.Tensor:
+    """World rotation of each joint frame: the products of the relative rotations along the chain.
+
+    Shape: rot_mats (B, J, 3, 3), levels: kinematic_levels(parents) -> (B, J, 3, 3).
+    """
+    glob = rot_mats.clone()
+    for idx, pidx in _depths(levels, rot_mats.device):
+        glob[:, idx] = glob[:, pidx] @ rot_mats[:, idx]
+    return glob
+
+
+def rigid_chain(rot_mats: torch.Tensor, joints: torch.Tensor, parents, levels=None):
     """Forward kinematics.
 
     Args:
         rot_mats: (B, J, 3, 3) relative rotations; joints: (B, J, 3) rest joint locations;
-        parents: (J,) parent indices, parents[0] = -1: a list of ints (no host read), or a long tensor (read to the
-            host once: on a GPU one wait for the device, where reading each parent waited J - 1 times).
+        parents: (J,) parent indices, parents[0] = -1 (a list of ints or a long tensor);
+        levels: kinematic_levels(parents) when the caller holds them (on the device: no host-device copy);
+            computed from `parents` otherwise.
     Returns:
         global_rot: (B, J, 3, 3) rotation of each joint frame in the world;
         posed_joints: (B, J, 3) joint locations after posing (root at its rest location);
         skin_transforms: (B, J, 4, 4) transforms taking rest-pose points to posed points.
     """
     B, J = joints.shape[:2]
-    par = parents.tolist() if isinstance(parents, torch.Tensor) else [int(p) for p in parents]
-    rel = joints.clone()
-    rel[:, 1:] = joints[:, 1:] - joints[:, par[1:]]
-    rots, locs = [rot_mats[:, 0]], [joints[:, 0]]
-    for j in range(1, J):
-        p = par[j]
-        rots.append(rots[p] @ rot_mats[:, j])
-        locs.append(locs[p] + (rots[p] @ rel[:, j, :, None])[..., 0])
-    global_rot = torch.stack(rots, dim=1)
-    posed_joints = torch.stack(locs, dim=1)
+    levels = kinematic_levels(parents) if levels is None else levels
+    glob, posed = rot_mats.clone(), joints.clone()
+    for idx, pidx in _depths(levels, joints.device):
+        pr = glob[:, pidx]
+        glob[:, idx] = pr @ rot_mats[:, idx]
+        posed[:, idx] = posed[:, pidx] + (pr @ (joints[:, idx] - joints[:, pidx])[..., None])[..., 0]
     # x_posed = R_j (x_rest - J_j) + posed_J_j
-    t = posed_joints - (global_rot @ joints[..., None])[..., 0]
+    t = posed - (glob @ joints[..., None])[..., 0]
     skin = torch.zeros(B, J, 4, 4, dtype=joints.dtype, device=joints.device)
-    skin[..., :3, :3] = global_rot
+    skin[..., :3, :3] = glob
     skin[..., :3, 3] = t
     skin[..., 3, 3] = 1.0
-    return global_rot, posed_joints, skin
+    return glob, posed, skin
 
 
 def skin_vertices(vertices: torch.Tensor, weights: torch.Tensor, skin: torch.Tensor) -> torch.Tensor:

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from .fingerprint import body_fingerprint
-from .lbs import pose_blend, rigid_chain, rodrigues, shape_blend, skin_vertices
+from .lbs import kinematic_levels, pose_blend, rigid_chain, rodrigues, shape_blend, skin_vertices
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 DEFAULT_BODY_FILE = ASSETS / "anny_smpl_neutral.npz"
@@ -140,6 +140,9 @@ class Body(torch.nn.Module):
         self.register_buffer("lbs_weights", torch.as_tensor(arrays["weights"], dtype=f32))
         self.register_buffer("parents", torch.as_tensor(parents))
         self.parent_list = [int(p) for p in parents]  # the same on the host: forward kinematics reads no device value
+        order, parent, self._chain_sizes = kinematic_levels(self.parent_list)  # forward kinematics by depth
+        self.register_buffer("_chain_order", order, persistent=False)
+        self.register_buffer("_chain_parent", parent, persistent=False)
         self.register_buffer("faces_tensor", torch.as_tensor(self.faces))
         posedirs = arrays["posedirs"].reshape(-1, arrays["posedirs"].shape[-1]).T  # (P, V*3)
         self.has_posedirs = bool(np.any(posedirs))
@@ -170,8 +173,6 @@ class Body(torch.nn.Module):
         if value.dtype != like.dtype or value.device != like.device:
             raise ValueError(f"{name} is {value.dtype} on {value.device} but the body is {like.dtype} on {like.device}; "
                              f"move one with .to(...) (e.g. body.to(device, dtype)).")
-        if not torch.isfinite(value).all():
-            raise ValueError(f"{name} contains NaN or Inf.")
         return value
 
     def forward(self, betas=None, global_orient=None, body_pose=None, transl=None, **unused) -> BodyOutput:
@@ -197,22 +198,35 @@ class Body(torch.nn.Module):
                              f"is nothing to pose).")
         like = self.v_template
         J = self.num_joints
+        supplied = [k for k, v in (("betas", betas), ("global_orient", global_orient), ("body_pose", body_pose),
+                                   ("transl", transl)) if v is not None]
         betas = self._param("betas", betas, self.num_betas, B, like)
         global_orient = self._param("global_orient", global_orient, 3, B, like)
         body_pose = self._param("body_pose", body_pose, (J - 1) * 3, B, like)
         transl = self._param("transl", transl, 3, B, like)
+        if supplied:  # zeros stand for the others
+            values = dict(betas=betas, global_orient=global_orient, body_pose=body_pose, transl=transl)
+            finite = torch.stack([torch.isfinite(values[k]).all() for k in supplied]).tolist()  # one device read
+            for name, ok in zip(supplied, finite):
+                if not ok:
+                    raise ValueError(f"{name} contains NaN or Inf.")
 
         full_pose = torch.cat([global_orient, body_pose], dim=1)
         v_shaped = shape_blend(self.v_template, self.shapedirs, betas)
         rest_joints = torch.einsum("jv,bvc->bjc", self.J_regressor, v_shaped)
         rot_mats = rodrigues(full_pose)
         v_posed = v_shaped + pose_blend(rot_mats, self.posedirs if self.has_posedirs else None)
-        _, posed_joints, skin = rigid_chain(rot_mats, rest_joints, self.parent_list)
+        _, posed_joints, skin = rigid_chain(rot_mats, rest_joints, self.parent_list, self.chain_levels)
         vertices = skin_vertices(v_posed, self.lbs_weights, skin) + transl[:, None]
         skin = skin.clone()
         skin[..., :3, 3] = skin[..., :3, 3] + transl[:, None]
         return BodyOutput(vertices=vertices, joints=posed_joints + transl[:, None], full_pose=full_pose, betas=betas,
                           global_orient=global_orient, body_pose=body_pose, transl=transl, joint_transforms=skin)
+
+    @property
+    def chain_levels(self) -> tuple:
+        """`lbs.kinematic_levels` of this body's tree, on its device (pass to `lbs.rigid_chain`)."""
+        return self._chain_order, self._chain_parent, self._chain_sizes
 
     def extra_repr(self) -> str:
         return f"model_path={self.model_path}, vertices={self.v_template.shape[0]}, num_betas={self.num_betas}, fingerprint={self.fingerprint}"

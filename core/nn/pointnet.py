@@ -61,12 +61,15 @@ class ResnetPointNet(nn.Module):
         """Build from a :class:`volsmpl.nn.config.VolumeConfig`."""
         return cls(cfg.latent_dim, cfg.encoder_hidden, cfg.encoder_blocks)
 
-    # clouds per pass: activations of ~32k points x 256 channels stay cache-sized on CPUs
-    # (measured 1.7x faster than one pass over 128 clouds of 1,000 points, forward; 2.4x with backward)
+    # clouds per pass on a CPU: activations of ~32k points x 256 channels stay cache-sized there (measured 1.7x
+    # faster than one pass over 128 clouds of 1,000 points, forward; 2.4x with backward); other devices take
+    # gpu_cloud_chunk clouds per pass (one pass for 16 bodies of 16 parts: launches, not caches, set their cost)
     cloud_chunk = 32
+    gpu_cloud_chunk = 256
 
     def forward(self, points: torch.Tensor) -> torch.Tensor:
-        """Encode point clouds (processed cloud_chunk clouds at a time; the result does not depend on it).
+        """Encode point clouds (cloud_chunk clouds at a time on a CPU, gpu_cloud_chunk elsewhere; the result does
+        not depend on it).
 
         Args:
             points: (N, P, 3) N clouds of P >= 1 points each (e.g. N = bodies * parts).
@@ -78,8 +81,9 @@ class ResnetPointNet(nn.Module):
                              f"got {tuple(points.shape)}")
         if points.shape[1] == 0:
             raise ValueError("ResnetPointNet got empty point clouds (P = 0); sample at least one point per part")
-        if points.shape[0] > self.cloud_chunk:
-            return torch.cat([self._encode(c) for c in points.split(self.cloud_chunk)])
+        chunk = self.cloud_chunk if points.device.type == "cpu" else self.gpu_cloud_chunk
+        if points.shape[0] > chunk:
+            return torch.cat([self._encode(c) for c in points.split(chunk)])
         return self._encode(points)
 
     def _encode(self, points: torch.Tensor) -> torch.Tensor:

@@ -55,9 +55,9 @@ def main() -> None:
 
     body = volsmpl.create_body().to(device)
     vol = volsmpl.attach_volume(body).to(device)
-    default = (vol.chunk_elems, vol.cpu_chunk_elems, vol.net.decoder.TILE_ROWS)
+    default = (vol.chunk_elems, vol.cpu_chunk_elems, vol.gpu_chunk_elems, vol.net.decoder.TILE_ROWS)
     say(f"device {torch.cuda.get_device_name(device) if cuda else 'cpu'}, torch {torch.__version__}, "
-        f"chunk_elems {vol.chunk_elems}, tile rows {vol.net.decoder.TILE_ROWS}")
+        f"chunk_elems {vol.chunk_elems}, gpu_chunk_elems {vol.gpu_chunk_elems}, tile rows {vol.net.decoder.TILE_ROWS}")
     sort_dev = "self_cuda_time_total" if cuda else "self_cpu_time_total"
     for B in args.batch:
         data = make_frames(body, B, args.points, 1, seed=0)
@@ -67,9 +67,9 @@ def main() -> None:
             ref = None
             for setting in ("default", "onechunk"):
                 if setting == "default":
-                    vol.chunk_elems, vol.cpu_chunk_elems, tiles = default
+                    vol.chunk_elems, vol.cpu_chunk_elems, vol.gpu_chunk_elems, tiles = default
                 else:
-                    vol.chunk_elems = vol.cpu_chunk_elems = 1 << 62
+                    vol.chunk_elems = vol.cpu_chunk_elems = vol.gpu_chunk_elems = 1 << 62
                     tiles = 1 << 62
                 vol.net.set_tile_rows(tiles)
                 enc = vol.encode(out, fresh=True)
