@@ -49,7 +49,8 @@ import torch
 from .meter import Meter, peak_memory, run_isolated, timed_ms
 
 __all__ = ["make_frames", "bodybody_inputs", "run_job", "volume_job", "winding_job", "build_volume",
-           "memory_first_and_steady", "fit_budget", "flops_per_pair", "derived", "matmul_rate", "profile_query"]
+           "memory_first_and_steady", "fit_budget", "flops_per_pair", "derived", "matmul_rate", "profile_query",
+           "is_top_level_op"]
 
 
 # ---------------------------------------------------------------------------------------------- inputs
@@ -169,7 +170,7 @@ def profile_query(query, runs: int = 3, device="cpu") -> dict:
             if cuda:
                 torch.cuda.synchronize(device)
         events = prof.events()
-        top = [e for e in events if e.name.startswith("aten::") and _outside_aten(e)]
+        top = [e for e in events if e.name.startswith("aten::") and is_top_level_op(e)]
         counts.append(len(top))
         if not names:
             for e in top:
@@ -181,7 +182,7 @@ def profile_query(query, runs: int = 3, device="cpu") -> dict:
             "t_decoder_ms": float(np.median(dec)) if dec else None}
 
 
-def _outside_aten(event) -> bool:
+def is_top_level_op(event) -> bool:
     """True when no enclosing profiler event of `event` is an aten operator (a top-level operator call)."""
     parent = event.cpu_parent
     while parent is not None:
