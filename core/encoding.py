@@ -149,13 +149,17 @@ class EncodingCache:
             need |= inside_boxes(x, box_min.detach(), box_max.detach()).any(dim=2).any(dim=0)
         return need
 
-    def _cached(self, out, key: tuple) -> Encoding | None:
+    def _cached(self, out, key: tuple | None = None) -> Encoding | None:
         """The encoding made earlier of `out` (or of an equal constant output) by this volume with the same
-        weights: same content fingerprints (`key` = cache_key(out)), else None. One made under torch.no_grad()
-        is not served where gradients may flow (the output or a weight requires grad): it has no graph, and the
-        gradients of the poses, shapes or weights would be lost (None or 0)."""
+        weights: same content fingerprints (`key` = cache_key(out), computed here when not given and only when
+        there is a candidate: a new output of a body that moves costs no fingerprint), else None. One made under
+        torch.no_grad() is not served where gradients may flow (the output or a weight requires grad): it has no
+        graph, and the gradients of the poses, shapes or weights would be lost (None or 0)."""
         constant = not (out.vertices.requires_grad or out.joints.requires_grad or out.full_pose.requires_grad)
         cached = getattr(out, "_volsmpl_encoding", None)
+        if (cached is None or cached[0] is not self) and not (constant and self._last is not None):
+            return None
+        key = self.cache_key(out) if key is None else key
         found = cached[1] if cached is not None and cached[0] is self and cached[1].key == key else None
         last = self._last
         if found is None and constant and last is not None and last.key == key:

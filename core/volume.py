@@ -452,7 +452,7 @@ class Volume(EncodingCache, BodyVolume):
         if not tau > 0:
             raise ValueError(f"tau must be > 0 (metres: the SDF scale of the soft occupancy), got {tau}")
         check_output(out)
-        enc = None if self.training else self._cached(out, self.cache_key(out))
+        enc = None if self.training else self._cached(out)
         G, box_min, box_max = self._frames(out) if enc is None else (enc.G, enc.box_min, enc.box_max)
         mask = self.partition.collision_mask
         overl, samples, padded = overlap_samples(G, box_min, box_max, mask, n_points, generator)

@@ -207,3 +207,21 @@ def test_encoding_made_without_graph_is_not_served_to_a_gradient(tiny_config, lo
         assert (r is None) == (g is None)
         if r is not None:
             assert torch.allclose(g, r, atol=1e-6 + 1e-5 * float(r.abs().max())), float((g - r).abs().max())
+
+
+def test_fingerprint_only_when_a_cached_encoding_could_answer(setup, monkeypatch):
+    """The cache's fingerprint (a pass over 3.6 M weights and a host read) is taken only when an encoding could be
+    served: never for the new output of a body that moves (every optimisation step's `selfpen_loss`), and still for
+    an output that carries an encoding, whose edit must then be caught (test_edited_output_is_re_encoded)."""
+    b, vol = setup
+    calls = []
+    original = vol.cache_key
+    monkeypatch.setattr(vol, "cache_key", lambda out: calls.append(1) or original(out))
+    pose = random_pose(1, seed=31)["body_pose"].requires_grad_()
+    out = b(body_pose=pose)
+    vol.selfpen_loss(out, n_points=50, generator=torch.Generator().manual_seed(0))
+    assert calls == []
+    vol.query(out, _points(out, 50))          # encodes and caches on `out`
+    calls.clear()
+    vol.selfpen_loss(out, n_points=50, generator=torch.Generator().manual_seed(0))
+    assert calls == [1]
