@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU checklist, run on a lent device machine (a bare image with CUDA torch and no open3d) from the repo root:
-#     tools/gpu_checks.sh session            # one call for a whole session (~8.5 min): cuda tests, bench, profile,
+#     tools/gpu_checks.sh session            # one call for a whole session (~9 min): cuda tests, bench, profile, CUDA-graph probe,
 #                                            # selfpen and motion's cost on CUDA (what a 15-minute lease can check)
 #     tools/gpu_checks.sh checks             # cuda-marked tests and selfpen on CUDA
 #     tools/gpu_checks.sh bench              # `volsmpl bench --device cuda` (B = 1, 8; 60k points)
@@ -41,17 +41,18 @@ step() {  # step NAME TIMEOUT CMD...: run with a wall-clock limit, log to $W/NAM
 }
 
 case "${1:-}" in
-session)  # the engine's CUDA paths first (tests), then its figures; each step bounded so that the call ends in ~8.5 min
-    step pytest_cuda 100 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
+session)  # the engine's CUDA paths first (tests), then its figures; each step bounded so that the call ends in ~9 min
+    step pytest_cuda 90 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
         tests/test_partition.py tests/test_train.py tests/test_train_state.py tests/test_groundtruth.py
-    step bench_cuda 200 $V bench --device cuda --models volsmpl,volsmpl-onechunk,volsmpl-bf16,volsmpl-dense,coap \
+    step bench_cuda 180 $V bench --device cuda --models volsmpl,volsmpl-onechunk,volsmpl-bf16,volsmpl-dense,coap \
         --batch 1 8 --points 60000 --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody \
         --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
     step profile 60 python3 docs/scripts/cuda_profile.py --device cuda --batch 1 8 --out "$W/prof"
     cp "$W/prof/cuda_profile.txt" "$OUT"/ 2>/dev/null
+    step graphs 40 python3 docs/scripts/cuda_graphs_probe.py --batch 1 8
     step selfpen_cuda 60 $V selfpen --device cuda --model volsmpl,coap --render 0 --out "$W/selfpen"
     cp "$W/selfpen/results.json" "$OUT/selfpen_results.json" 2>/dev/null
-    step motion_cost 90 $V motion --device cuda --model volsmpl,coap,mesh --scenes 1 --sequences 1 --iters 1 \
+    step motion_cost 75 $V motion --device cuda --model volsmpl,coap,mesh --scenes 1 --sequences 1 --iters 1 \
         --render 0 --published-cost --out "$W/motion"
     cat "$W"/*.log > "$OUT/session.log" ;;
 checks)
