@@ -11,7 +11,6 @@ runs it) and of copy + replay, and the largest difference of their codes, boxes 
 """
 import argparse
 import statistics
-import time
 from types import SimpleNamespace
 
 import torch
@@ -19,19 +18,12 @@ import torch
 import volsmpl
 from volsmpl.bench_jobs import make_frames
 from volsmpl.encoding import Encoding
+from volsmpl.meter import timed_ms
 
 
 def median_ms(fn, device, repeats: int) -> float:
-    out = []
-    for _ in range(repeats):
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-        t0 = time.perf_counter()
-        fn()
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-        out.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(out)
+    """Median milliseconds of `repeats` calls (volsmpl.meter.timed_ms: synchronised on the device)."""
+    return statistics.median(timed_ms([fn] * repeats, device))
 
 
 def tensors_of(x) -> list:

@@ -14,25 +14,19 @@ import gzip
 import os
 import shutil
 import statistics
-import time
 
 import torch
 
 import volsmpl
 from volsmpl.bench_jobs import make_frames
+from volsmpl.meter import timed_ms
 
 
 def timed(fn, device, n=10, warm=3):
+    """Median milliseconds of n calls after `warm` untimed ones (volsmpl.meter.timed_ms: synchronised on the device)."""
     for _ in range(warm):
         fn()
-    out = []
-    for _ in range(n):
-        torch.cuda.synchronize(device) if device.type == "cuda" else None
-        t0 = time.perf_counter()
-        fn()
-        torch.cuda.synchronize(device) if device.type == "cuda" else None
-        out.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(out)
+    return statistics.median(timed_ms([fn] * n, device))
 
 
 def main() -> None:
