@@ -12,7 +12,8 @@
 #      VolumetricSMPL and the mesh, made here by the export (the table's own code) and by the current code, compared
 #      (VERIFY_TOL=1e-5 in the environment for code whose backward pass sums in another order: README, "Results say");
 #   3. the per-frame cost and memory columns from the current code on this machine (the export's meter polled the
-#      resident set in a thread: its cost columns are not quoted), in out/motion_cost/results.json.
+#      resident set in a thread: its cost columns are not quoted), in out/motion_cost/results.json, and the frame
+#      strips of room 0's first pair (docs/motion/strip_*.png).
 # Each step prints what it wrote; the README's motion section is then written by hand from docs/motion/results.json
 # (quality columns) and out/motion_cost/results.json (cost columns).
 set -euo pipefail
@@ -45,7 +46,12 @@ PYTHONPATH="$SNAP" "$V" motion --model volsmpl,coap,mesh "${CHECK[@]}" --out out
 "$V" report --verify motion=out/motion_check_fresh/results.json --baseline motion=out/motion_check_base/results.json \
     --verify-tol "${VERIFY_TOL:-1e-6}"
 
-echo "== 3. per-frame cost with the current code (run it on a quiet machine)"
-"$V" motion --model volsmpl,coap,mesh --scenes 1 --sequences 1 --frames 80 --iters 100 --published-cost \
-    --threads 1 --render 0 --out out/motion_cost
+echo "== 3. per-frame cost with the current code (run it on a quiet machine), and the frame strips"
+# The table's processes ran with --render 0 and reused sequences are not rendered again (their records keep the
+# pelvis path, not the walk), so the strips come from this run: room 0's first pair, each model at the weight its
+# table row uses (COAP: the tuned choice, read from the table's results.json).
+WC=$(python3 -c "import json; print(json.load(open('$OUT/results.json'))['tuning']['choice']['coap'])")
+"$V" motion --model volsmpl,coap,mesh --w coap="$WC" --scenes 1 --sequences 1 --frames 80 --iters 100 \
+    --published-cost --threads 1 --render 1 --out out/motion_cost
+cp out/motion_cost/strip_*.png docs/motion/
 echo "motion_assemble: done; write the README's motion section from docs/motion/results.json and out/motion_cost/results.json"
