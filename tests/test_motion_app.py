@@ -316,19 +316,26 @@ def test_end_to_end_every_model(tmp_path):
 def test_tuned_protocol_runs_the_sweep_on_tuning_rooms_only(tmp_path, capsys):
     from volsmpl.cli import main
     out = tmp_path / "motion"
-    rc = main(["motion", "--model", "volsmpl,coap", "--w", "coap=0.1,1", "--scenes", "2", "--sequences", "1",
+    rc = main(["motion", "--model", "volsmpl,coap", "--w", "coap=0.1,1", "--scenes", "3", "--sequences", "1",
                "--frames", "10", "--iters", "2", "--cost-frames", "1", "--cost-repeats", "1", "--render", "0",
                "--protocol", "tuned", "--out", str(out)])
     assert rc == 0
     d = json.loads((out / "results.json").read_text())
     tune, test = d["tuning"]["tune_scenes"], d["tuning"]["test_scenes"]
-    assert len(tune) == 1 and len(test) == 1 and d["config"]["protocol"] == "tuned"
+    assert len(tune) == 1 and len(test) == 2 and d["config"]["protocol"] == "tuned"
     by_room = {r: sorted((c["model"], c["w"]) for c in d["cases"] if c["scene"] == r) for r in tune + test}
     chosen = d["tuning"]["choice"]["coap"]
     assert by_room[tune[0]] == [("coap", 0.1), ("coap", 1.0), ("volsmpl", 1.0)]
-    assert by_room[test[0]] == sorted([("coap", chosen), ("volsmpl", 1.0)])
-    assert d["summary"]["coap"]["w"] == chosen and d["summary"]["coap"]["n_sequences"] == 1
+    assert by_room[test[0]] == by_room[test[1]] == sorted([("coap", chosen), ("volsmpl", 1.0)])
+    assert d["summary"]["coap"]["w"] == chosen and d["summary"]["coap"]["n_sequences"] == 2
     assert d["summary"]["coap_w0.1"]["split"] == "tune"
+    # the compared rows' paired differences: the test rooms' two sequences, COAP at its chosen weight
+    (pair,) = d["paired"]["pairs"]
+    coll = {(c["model"], c["scene"]): c["metrics"]["collision_cm"] for c in d["cases"] if c["scene"] in test
+            and c["w"] in (1.0 if c["model"] == "volsmpl" else chosen,)}
+    assert pair["n"] == 2 and pair["b"] == f"coap (w {chosen:g})"
+    assert pair["metrics"]["collision_cm"]["mean_diff"] == pytest.approx(
+        np.mean([coll[("volsmpl", r)] - coll[("coap", r)] for r in test]))
     assert main(["motion", "--model", "volsmpl", "--scenes", "1", "--protocol", "tuned", "--out", str(out)]) == 2
     assert "--scenes 2 or more" in capsys.readouterr().err
 

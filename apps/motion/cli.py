@@ -14,7 +14,8 @@ COAP setting; --coll-frames forces 'all' or a number).
 With two rooms or more, every third room tunes the weights and the others test (tuning.py): summary.<model>_test
 is each model over the test rooms at the weight that scored best on the tuning rooms (results.json's `tuning`).
 
-Writes OUT/results.json (summary.<model>, <model>_w<w> and <model>_test, the paper's rows, per-sequence records, meta),
+Writes OUT/results.json (summary.<model>, <model>_w<w> and <model>_test, the paper's rows, per-sequence records, meta,
+and `paired`: the compared rows' per-sequence differences with bootstrap intervals, stats.py),
 OUT/topdown_<scene>.png and OUT/strip_<scene>_<k>_<model>.png for the first --render sequences.
 """
 from __future__ import annotations
@@ -28,6 +29,7 @@ import numpy as np
 import torch
 
 from .summary import cost_columns, fit_budget, format_table, paper_summary, tuned_rows, tuned_summary, wkey
+from .stats import compared_runs, format_pairs, paired_differences
 from .tuning import choose_weights, split_scenes
 
 PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
@@ -297,6 +299,10 @@ def run(args) -> int:
         "paper": {**paper.rows("motion"), **paper.rows("coll_weights")},
         "cases": cases, "meta": machine_info(args.device),
     }
+    runs = compared_runs(result)
+    if len(runs) >= 2 and min(len(r) for r in runs.values()) >= 2:   # paired differences need 2+ shared sequences
+        result["paired"] = paired_differences(runs)
+        print(format_pairs(result["paired"]))
     write_atomic(out / "results.json", json.dumps(result, indent=1))
     print(f"wrote {out / 'results.json'}")
     return 0

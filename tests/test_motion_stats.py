@@ -1,0 +1,89 @@
+"""Paired differences of the motion table (volsmpl.apps.motion.stats) on hand-made records: values by hand, the
+confidence interval against the normal-theory interval, and the rows a results.json compares."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from volsmpl.apps.motion import stats as S
+
+
+def _rec(model, w, scene, seq, **metrics):
+    base = {"collision_cm": 0.0, "collision_frames_pct": 0.0, "goal_dist_m": 0.0, "foot_skate_cm": 0.0}
+    return {"model": model, "w": w, "scene": scene, "sequence": seq, "metrics": {**base, **metrics}}
+
+
+def test_constant_values_give_a_point_interval():
+    assert S.mean_ci([0.25, 0.25, 0.25]) == (0.25, 0.25)
+
+
+def test_interval_matches_normal_theory_on_a_large_sample():
+    x = np.random.default_rng(3).normal(1.0, 2.0, 4000)
+    lo, hi = S.mean_ci(x, n_resamples=4000)
+    half = 1.959964 * x.std(ddof=1) / np.sqrt(x.size)
+    assert lo == pytest.approx(x.mean() - half, abs=0.1 * half)
+    assert hi == pytest.approx(x.mean() + half, abs=0.1 * half)
+
+
+def test_interval_refuses_too_few_or_non_finite_values():
+    with pytest.raises(ValueError, match=">= 2 finite"):
+        S.mean_ci([1.0])
+    with pytest.raises(ValueError, match=">= 2 finite"):
+        S.mean_ci([1.0, float("nan")])
+
+
+def test_pairs_match_sequences_not_list_order():
+    a = [_rec("volsmpl", 1.0, "r", k, collision_cm=v) for k, v in enumerate([1.0, 2.0, 3.0])]
+    b = [_rec("coap", 0.1, "r", k, collision_cm=v) for k, v in enumerate([0.0, 2.0, 5.0])][::-1]
+    b.append(_rec("coap", 0.1, "other", 0, collision_cm=9.0))     # walked by b only: not compared
+    t = S.paired_differences({"volsmpl": a, "coap": b}, n_resamples=200)
+    (p,) = t["pairs"]
+    m = p["metrics"]["collision_cm"]
+    assert (p["a"], p["b"], p["n"]) == ("volsmpl", "coap", 3)
+    assert m["mean_a"] == pytest.approx(2.0) and m["mean_b"] == pytest.approx(7 / 3)
+    assert m["mean_diff"] == pytest.approx(-1 / 3)
+    assert (m["a_lower"], m["equal"], m["a_higher"]) == pytest.approx((1 / 3, 1 / 3, 1 / 3))
+    assert m["ci"][0] <= m["mean_diff"] <= m["ci"][1]
+
+
+def test_pairs_refuse_disjoint_runs_and_missing_metrics():
+    a = [_rec("volsmpl", 1.0, "r", k) for k in range(3)]
+    with pytest.raises(ValueError, match="share 0 sequences"):
+        S.paired_differences({"volsmpl": a, "coap": [_rec("coap", 0.1, "s", k) for k in range(3)]})
+    bad = [_rec("coap", 0.1, "r", k, goal_dist_m=float("inf")) for k in range(3)]
+    with pytest.raises(ValueError, match="goal_dist_m"):
+        S.paired_differences({"volsmpl": a, "coap": bad})
+
+
+def test_compared_runs_tuned_protocol_takes_the_choice_on_test_rooms():
+    cases = ([_rec("coap", w, s, k) for w in (0.01, 0.1) for s in ("t0", "x1") for k in range(2)]
+             + [_rec("volsmpl", 1.0, s, k) for s in ("t0", "x1") for k in range(2)])
+    result = {"cases": cases, "config": {"models": ["volsmpl", "coap"], "weights": {"volsmpl": [1.0],
+                                                                                    "coap": [0.01, 0.1]}},
+              "tuning": {"choice": {"volsmpl": 1.0, "coap": 0.01}, "test_scenes": ["x1"], "tune_scenes": ["t0"]}}
+    runs = S.compared_runs(result)
+    assert list(runs) == ["volsmpl", "coap (w 0.01)"]
+    assert all(r["scene"] == "x1" for recs in runs.values() for r in recs)
+    assert {r["w"] for r in runs["coap (w 0.01)"]} == {0.01}
+    result["tuning"] = None        # the paper's protocol: Table 5's COAP row (w = 0.1) on every room
+    runs = S.compared_runs(result)
+    assert {r["w"] for r in runs["coap (w 0.1)"]} == {0.1} and len(runs["coap (w 0.1)"]) == 4
+
+
+def test_cli_errors_are_one_line(tmp_path, capsys):
+    bad = tmp_path / "r.json"
+    bad.write_text("{}")
+    assert S.main([str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "results.json of volsmpl motion" in err
+    bad.write_text("not json")
+    assert S.main([str(bad)]) == 2
+    assert "is not JSON" in capsys.readouterr().err
+    good = tmp_path / "g.json"
+    cases = [_rec(m, 1.0, "r", k, collision_cm=float(k + (m == "mesh"))) for m in ("volsmpl", "mesh") for k in range(4)]
+    good.write_text(json.dumps({"cases": cases, "config": {"models": ["volsmpl", "mesh"]}}))
+    assert S.main([str(good), "--out", str(tmp_path / "p.json"), "--resamples", "200"]) == 0
+    p = json.loads((tmp_path / "p.json").read_text())["pairs"][0]
+    assert p["metrics"]["collision_cm"]["mean_diff"] == pytest.approx(-1.0)
