@@ -17,8 +17,8 @@
 #      compute the same objective and the same step; the table's 100-step outcomes are compared as statistics
 #      instead (step 4; README, "apps/motion");
 #   3. the per-frame cost and memory columns from the current code on this machine (the export's meter polled the
-#      resident set in a thread: its cost columns are not quoted), in out/motion_cost/results.json, and the frame
-#      strips of room 0's first pair (docs/motion/strip_*.png);
+#      resident set in a thread: its cost columns are not quoted), in out/motion_cost/results.json (no walk is
+#      optimised: --iters 0), and the frame strips of room 0's first pair (docs/motion/strip_*.png);
 #   4. the compared rows' paired differences with bootstrap intervals (volsmpl.apps.motion.stats), docs/motion/paired.json.
 # Each step prints what it wrote; the README's motion section is then written by hand from docs/motion/results.json
 # (quality columns) and out/motion_cost/results.json (cost columns).
@@ -46,20 +46,23 @@ PYTHONPATH="$SNAP" "$V" motion --model volsmpl,coap,mesh "${TABLE[@]}" --publish
 mkdir -p docs/motion
 cp "$OUT/results.json" "$OUT"/*.png docs/motion/
 
-echo "== 2. chained re-run check: the export and the current code on two sequences, this machine"
+echo "== 2. chained re-run check: the export and the current code, two sequences of two rooms, one Adam step, this machine"
 PYTHONPATH="$SNAP" "$V" motion --model volsmpl,coap,mesh "${CHECK[@]}" --out out/motion_check_base
 "$V" motion --model volsmpl,coap,mesh "${CHECK[@]}" --out out/motion_check_fresh
 "$V" report --verify motion=out/motion_check_fresh/results.json --baseline motion=out/motion_check_base/results.json \
     --verify-tol "${VERIFY_TOL:-1e-6}"
 
 echo "== 3. per-frame cost with the current code (run it on a quiet machine), and the frame strips"
+"$V" motion --model volsmpl,coap,mesh --scenes 1 --sequences 1 --frames 80 --iters 0 --published-cost \
+    --threads 1 --render 0 --out out/motion_cost
 # The table's processes ran with --render 0 and reused sequences are not rendered again (their records keep the
-# pelvis path, not the walk), so the strips come from this run: room 0's first pair, each model at the weight its
-# table row uses (COAP: the tuned choice, read from the table's results.json).
+# pelvis path, not the walk), so the strips come from a run of their own (timing-free: it may share the machine):
+# room 0's first pair, each model at the weight its table row uses (COAP: the tuned choice).
 WC=$(python3 -c "import json; print(json.load(open('$OUT/results.json'))['tuning']['choice']['coap'])")
 "$V" motion --model volsmpl,coap,mesh --w coap="$WC" --scenes 1 --sequences 1 --frames 80 --iters 100 \
-    --published-cost --threads 1 --render 1 --out out/motion_cost
-cp out/motion_cost/strip_*.png docs/motion/
+    --threads 1 --render 1 --out out/motion_strips
+cp out/motion_strips/strip_*.png docs/motion/
+
 echo "== 4. paired differences of the compared rows (bootstrap intervals over the test sequences)"
 "$(pwd)/.venv/bin/python" -m volsmpl.apps.motion.stats docs/motion/results.json --out docs/motion/paired.json
 echo "motion_assemble: done; write the README's motion section from docs/motion/results.json and out/motion_cost/results.json"
