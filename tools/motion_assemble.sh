@@ -21,7 +21,8 @@
 #      optimised: --iters 0), and the frame strips of room 0's first pair (docs/motion/strip_*.png);
 #   4. the compared rows' paired differences with bootstrap intervals (volsmpl.apps.motion.stats), docs/motion/paired.json.
 # Each step prints what it wrote; the README's motion section is then written by hand from docs/motion/results.json
-# (quality columns) and out/motion_cost/results.json (cost columns).
+# (quality columns), out/motion_cost/results.json (per-frame cost columns), out/motion_strips/results.json (the
+# total memory of one whole-walk optimisation, measured by the current meter) and docs/motion/paired.json.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 V="$(pwd)/.venv/bin/volsmpl"
