@@ -99,7 +99,12 @@ SECTIONS: dict[str, Section] = {
         rs.selfpen_section, ("docs/selfpen_hands_through_thighs.png", "docs/selfpen_arm_through_head.png"), _CKPTS),
     "hoi": _app("hoi", ("3",), "Human-object reconstruction"),
     "egohmr": _app("egohmr", ("4",), "Human mesh recovery in 3D scenes (EgoHMR)"),
-    "motion": _app("motion", ("5", "D.1"), "Scene-constrained motion synthesis"),
+    "motion": Section(
+        "Scene-constrained motion synthesis", ("5", "D.1"), ("apps/motion",),
+        {"motion": ("docs/motion/results.json", "out/motion/results.json"), "motion_paired": "docs/motion/paired.json"},
+        {"motion": "volsmpl motion --out out/motion",
+         "motion_paired": "python -m volsmpl.apps.motion.stats docs/motion/results.json --out docs/motion/paired.json"},
+        rs.motion_section, (), _CKPTS),
 }
 
 

@@ -262,6 +262,28 @@ def summary_section(ctx) -> list[str]:
     return out
 
 
+def paired_table(p) -> list[str]:
+    """The paired differences of an app's compared rows (`paired`: volsmpl.apps.motion.stats) as a Markdown table;
+    none without them."""
+    if not isinstance(p, dict) or not p.get("pairs"):
+        return []
+    rows = [[f"{q['a']} - {q['b']}", m, fmt(v["mean_a"]), fmt(v["mean_b"]),
+             f"{v['mean_diff']:+.4g} [{v['ci'][0]:+.4g}, {v['ci'][1]:+.4g}]",
+             f"{v['a_lower']:.0%} / {v['a_higher']:.0%}", str(q["n"])]
+            for q in p["pairs"] for m, v in q["metrics"].items()]
+    head = [f"Paired over the same cases ({p.get('method', 'bootstrap')}, {p.get('confidence', 0.95):.0%} interval; "
+            f"{p.get('diff', 'a - b')}):", ""]
+    return head + md_table(["a - b", "metric", "mean a", "mean b", "a - b [interval]", "a lower / higher", "n"], rows)
+
+
+def motion_section(ctx) -> list[str]:
+    """Tables 5 and D.1 from `volsmpl motion` (summary_section) and the paired differences of its compared rows
+    (results 'motion_paired', else the result's own `paired`)."""
+    res = ctx["results"]
+    paired = res.get("motion_paired") or (res.get("motion") or {}).get("paired")
+    return summary_section(ctx) + ([""] + paired_table(paired) if paired_table(paired) else [])
+
+
 def tuning_note(t) -> list[str]:
     """The lines saying which rows a result tuned on which cases (`tuning`: tune_scenes, test_scenes, choice
     {back-end: weight}, criterion); none without it."""

@@ -85,5 +85,6 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
     cases = [_rec(m, 1.0, "r", k, collision_cm=float(k + (m == "mesh"))) for m in ("volsmpl", "mesh") for k in range(4)]
     good.write_text(json.dumps({"cases": cases, "config": {"models": ["volsmpl", "mesh"]}}))
     assert S.main([str(good), "--out", str(tmp_path / "p.json"), "--resamples", "200"]) == 0
-    p = json.loads((tmp_path / "p.json").read_text())["pairs"][0]
-    assert p["metrics"]["collision_cm"]["mean_diff"] == pytest.approx(-1.0)
+    table = json.loads((tmp_path / "p.json").read_text())
+    assert table["pairs"][0]["metrics"]["collision_cm"]["mean_diff"] == pytest.approx(-1.0)
+    assert "git_commit" in table["meta"] and table["source"]["results"] == str(good)

@@ -70,6 +70,28 @@ def test_motion_back_ends_split_over_tables_5_and_d1(tmp_path):
     assert "| paper: w. COAP (w=0.01) | 4.44 | 26.48 | 4.92 | 0.02 |" in d1
 
 
+PAIRED = {"confidence": 0.95, "method": "BCa bootstrap of the mean difference", "diff": "a - b",
+          "pairs": [{"a": "volsmpl", "b": "coap (w 0.01)", "n": 80,
+                     "metrics": {"collision_cm": {"mean_a": 0.18, "mean_b": 0.31, "mean_diff": -0.13,
+                                                  "ci": [-0.18, -0.08], "a_lower": 0.81, "equal": 0.09,
+                                                  "a_higher": 0.1}}}]}
+
+
+def test_motion_paired_differences_from_their_file_or_the_result(tmp_path):
+    res = write(tmp_path / "m.json", {"summary": {"volsmpl": {"frame_ms": 9.0}}})
+    pair = write(tmp_path / "p.json", PAIRED)
+    row = "| volsmpl - coap (w 0.01) | collision_cm | 0.180 | 0.310 | -0.13 [-0.18, -0.08] | 81% / 10% | 80 |"
+    text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"motion": res, "motion_paired": pair},
+                                  git=NoGit())
+    assert row in text and "95% interval" in text
+    res = write(tmp_path / "m2.json", {"summary": {"volsmpl": {"frame_ms": 9.0}}, "paired": PAIRED})
+    text, status = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"motion": res}, git=NoGit())
+    assert row in text and "motion_paired" in status["missing"]
+    res = write(tmp_path / "m3.json", {"summary": {"volsmpl": {"frame_ms": 9.0}}})
+    text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"motion": res}, git=NoGit())
+    assert "Paired over the same cases" not in text
+
+
 def test_paper_mismatch_is_noted(tmp_path):
     res = write(tmp_path / "s.json", {"summary": {"volsmpl": {"step_ms": 1.0}},
                                       "paper": {"volsmpl": {"step_ms": 15.0}}})

@@ -132,7 +132,9 @@ def main(argv=None) -> int:
     except (OSError, ValueError) as e:
         print(f"error: {args.results}: {e}", file=sys.stderr)
         return 2
-    table["source"] = {"results": str(args.results), "git_commit": (result.get("meta") or {}).get("git_commit")}
+    from volsmpl.provenance import machine_info
+    table["source"] = {"results": str(args.results), "table_commit": (result.get("meta") or {}).get("git_commit")}
+    table["meta"] = machine_info("cpu")   # the code that computed these differences (the table's: source)
     print(format_pairs(table))
     if args.out:
         write_atomic(Path(args.out), json.dumps(table, indent=1) + "\n")
