@@ -36,16 +36,20 @@ def test_interval_refuses_too_few_or_non_finite_values():
 
 def test_pairs_match_sequences_not_list_order():
     a = [_rec("volsmpl", 1.0, "r", k, collision_cm=v) for k, v in enumerate([1.0, 2.0, 3.0])]
-    b = [_rec("coap", 0.1, "r", k, collision_cm=v) for k, v in enumerate([0.0, 2.0, 5.0])][::-1]
-    b.append(_rec("coap", 0.1, "other", 0, collision_cm=9.0))     # walked by b only: not compared
+    b = [_rec("coap", 0.1, "other", 0, collision_cm=9.0)]            # walked by b only: not compared
+    b += [_rec("coap", 0.1, "r", k, collision_cm=v) for k, v in enumerate([0.0, 1.0, 2.0])][::-1]
     t = S.paired_differences({"volsmpl": a, "coap": b}, n_resamples=200)
     (p,) = t["pairs"]
     m = p["metrics"]["collision_cm"]
     assert (p["a"], p["b"], p["n"]) == ("volsmpl", "coap", 3)
-    assert m["mean_a"] == pytest.approx(2.0) and m["mean_b"] == pytest.approx(7 / 3)
-    assert m["mean_diff"] == pytest.approx(-1 / 3)
+    assert m["mean_a"] == pytest.approx(2.0) and m["mean_b"] == pytest.approx(1.0)
+    # paired by sequence every difference is +1 (in list order they would be -1, +1, +3)
+    assert m["mean_diff"] == pytest.approx(1.0) and m["ci"] == pytest.approx([1.0, 1.0])
+    assert (m["a_lower"], m["equal"], m["a_higher"]) == (0.0, 0.0, 1.0)
+    c = [_rec("mesh", 1.0, "r", k, collision_cm=v) for k, v in enumerate([1.0, 0.0, 5.0])]
+    m = S.paired_differences({"volsmpl": a, "mesh": c}, n_resamples=200)["pairs"][0]["metrics"]["collision_cm"]
     assert (m["a_lower"], m["equal"], m["a_higher"]) == pytest.approx((1 / 3, 1 / 3, 1 / 3))
-    assert m["ci"][0] <= m["mean_diff"] <= m["ci"][1]
+    assert m["mean_diff"] == pytest.approx(0.0) and m["ci"][0] <= m["mean_diff"] <= m["ci"][1]
 
 
 def test_pairs_refuse_disjoint_runs_and_missing_metrics():

@@ -104,6 +104,14 @@ MUTANTS = {
     "chain_by_depth_wrong_parent": ("core/body/lbs.py", "glob[:, idx] = glob[:, pidx] @ rot_mats[:, idx]",
                                     "glob[:, idx] = rot_mats[:, pidx] @ rot_mats[:, idx]",
                                     [T + "test_body_model.py::test_kinematic_levels_compose_the_chain_joint_by_joint"]),
+    # the eleventh session (2026-11-26): the motion table's paired differences
+    "paired_by_list_order": ("apps/motion/stats.py", "common = sorted(set(seqs[a]) & set(seqs[b]))",
+                             "common = list(seqs[a])[:min(len(seqs[a]), len(seqs[b]))]; seqs = {a: dict(zip(common, "
+                             "seqs[a].values())), b: dict(zip(common, seqs[b].values()))}",
+                             [T + "test_motion_stats.py::test_pairs_match_sequences_not_list_order"]),
+    "paired_interval_of_the_wrong_level": ("apps/motion/stats.py", "confidence_level=confidence,",
+                                           "confidence_level=confidence / 2,",
+                                           [T + "test_motion_stats.py::test_interval_matches_normal_theory_on_a_large_sample"]),
 }
 
 
