@@ -18,7 +18,7 @@
 #      instead (step 4; README, "apps/motion");
 #   3. the per-frame cost and memory columns from the current code on this machine (the export's meter polled the
 #      resident set in a thread: its cost columns are not quoted), in out/motion_cost/results.json (no walk is
-#      optimised: --iters 0), and the frame strips of room 0's first pair (docs/motion/strip_*.png);
+#      optimised: --iters 0), and the frame strips of rooms 0 and 1's first pairs (docs/motion/strip_*.png);
 #   4. the compared rows' paired differences with bootstrap intervals (volsmpl.apps.motion.stats), docs/motion/paired.json.
 # Each step prints what it wrote; the README's motion section is then written by hand from docs/motion/results.json
 # (quality columns), out/motion_cost/results.json (per-frame cost columns), out/motion_strips/results.json (the
@@ -58,9 +58,10 @@ echo "== 3. per-frame cost with the current code (run it on a quiet machine), an
     --threads 1 --render 0 --out out/motion_cost
 # The table's processes ran with --render 0 and reused sequences are not rendered again (their records keep the
 # pelvis path, not the walk), so the strips come from a run of their own (timing-free: it may share the machine):
-# room 0's first pair, each model at the weight its table row uses (COAP: the tuned choice).
+# the first pair of room 0 (a tuning room) and room 1 (a test room), each model at the weight its table row uses
+# (COAP: the tuned choice).
 WC=$(python3 -c "import json; print(json.load(open('$OUT/results.json'))['tuning']['choice']['coap'])")
-"$V" motion --model volsmpl,coap,mesh --w coap="$WC" --scenes 1 --sequences 1 --frames 80 --iters 100 \
+"$V" motion --model volsmpl,coap,mesh --w coap="$WC" --scenes 2 --sequences 1 --frames 80 --iters 100 \
     --threads 1 --render 1 --out out/motion_strips
 cp out/motion_strips/strip_*.png docs/motion/
 
