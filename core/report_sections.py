@@ -280,8 +280,8 @@ def motion_section(ctx) -> list[str]:
     """Tables 5 and D.1 from `volsmpl motion` (summary_section) and the paired differences of its compared rows
     (results 'motion_paired', else the result's own `paired`)."""
     res = ctx["results"]
-    paired = res.get("motion_paired") or (res.get("motion") or {}).get("paired")
-    return summary_section(ctx) + ([""] + paired_table(paired) if paired_table(paired) else [])
+    table = paired_table(res.get("motion_paired") or (res.get("motion") or {}).get("paired"))
+    return summary_section(ctx) + ([""] + table if table else [])
 
 
 def tuning_note(t) -> list[str]:
