@@ -10,20 +10,14 @@ runs it) and of copy + replay, and the largest difference of their codes, boxes 
 0). On a CPU only the eager time is printed (CUDA graphs need a GPU). Prints one line per batch size.
 """
 import argparse
-import statistics
 from types import SimpleNamespace
 
 import torch
 
 import volsmpl
+from cuda_profile import timed          # docs/scripts/cuda_profile.py: median ms after 3 warm-up calls
 from volsmpl.bench_jobs import make_frames
 from volsmpl.encoding import Encoding
-from volsmpl.meter import timed_ms
-
-
-def median_ms(fn, device, repeats: int) -> float:
-    """Median milliseconds of `repeats` calls (volsmpl.meter.timed_ms: synchronised on the device)."""
-    return statistics.median(timed_ms([fn] * repeats, device))
 
 
 def tensors_of(x) -> list:
@@ -50,10 +44,7 @@ def main() -> None:
         data = make_frames(body, B, 1000, 2, seed=0)
         with torch.no_grad():
             outs = [body(body_pose=data["body_pose"][f].to(device)) for f in range(2)]
-            eager = lambda: vol._encode(outs[1], None)
-            for _ in range(3):
-                eager()
-            t_eager = median_ms(eager, device, args.repeats)
+            t_eager = timed(lambda: vol._encode(outs[1], None), device, args.repeats)
             if device.type != "cuda":
                 print(f"B={B}: eager encode {t_eager:.2f} ms (CUDA graphs need a GPU)")
                 continue
@@ -78,9 +69,7 @@ def main() -> None:
                 graph.replay()
                 return enc_static
 
-            for _ in range(3):
-                replay()
-            t_graph = median_ms(replay, device, args.repeats)
+            t_graph = timed(replay, device, args.repeats)
             ref = vol._encode(outs[1], None)
             replay()
             diff = max(float((a - b).abs().max()) for a, b in zip(tensors_of(enc_static), tensors_of(ref)))
