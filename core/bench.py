@@ -14,7 +14,8 @@ query path), 'volsmpl-chunked' (the same on the engine before issue 28: `Volume.
 'volsmpl-dense' (the reference path: every part decoder on every point), 'coap' (COAP as published: every part
 on every point, i.e. dense), 'coap-sparse' (COAP's network on the sparse engine), and 'volsmpl-bf16' /
 'volsmpl-tf32' (the sparse engine in a reduced precision, `PRECISIONS`, `Volume.set_precision`; tf32 on CUDA only;
-their accuracy columns are measured in that precision), and 'volsmpl-onechunk' (the lean path with the whole batch
+their accuracy columns are measured in that precision), 'volsmpl-tiles' / 'volsmpl-grouped' (the sparse engine
+with that pair decoder, `PAIR_DECODERS`, `Volume.pair_decoder`, whichever the default is), and 'volsmpl-onechunk' (the lean path with the whole batch
 in one chunk and untiled decoders, `ONE_CHUNK`: its operator calls do not depend on B; the default 'volsmpl'
 keeps cache-sized chunks on the CPU, one body per chunk at 60k points). A model whose
 `attach_volume(body, model=...)` is not available is skipped with a note.
@@ -52,7 +53,7 @@ from .bench_jobs import bodybody_inputs, make_frames, matmul_rate, run_job
 from .bench_report import PAPER, caveats, compute_ratios, format_report, to_markdown
 from .provenance import machine_info
 
-__all__ = ["MODELS", "ENGINES", "PRECISIONS", "ONE_CHUNK", "BenchConfig", "model_available", "checkpoint_for", "bench_model",
+__all__ = ["MODELS", "ENGINES", "PRECISIONS", "PAIR_DECODERS", "ONE_CHUNK", "BenchConfig", "model_available", "checkpoint_for", "bench_model",
            "bench_bodybody", "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
            "add_parser", "config_from_args", "run", "PAPER", "compute_ratios", "format_report", "to_markdown"]
 
@@ -66,12 +67,16 @@ MODELS: Dict[str, Tuple[str, bool]] = {
     "volsmpl-bf16": ("volsmpl", False),     # the sparse engine with bfloat16 decoder layers (Volume.set_precision)
     "volsmpl-tf32": ("volsmpl", False),     # the sparse engine with TF32 matmuls (CUDA only)
     "volsmpl-onechunk": ("volsmpl", False),  # the lean path in one chunk per query, decoders untiled
+    "volsmpl-tiles": ("volsmpl", False),     # the sparse engine with the tiled pair decoder (Volume.pair_decoder)
+    "volsmpl-grouped": ("volsmpl", False),   # the sparse engine with one grouped matmul per decoder layer
 }
 
 #: benchmark model name -> Volume.engine of its sparse path (default 'lean')
 ENGINES: Dict[str, str] = {"volsmpl-chunked": "chunked"}
 #: benchmark model name -> Volume precision (default 'full'); their accuracy is measured in that precision
 PRECISIONS: Dict[str, str] = {"volsmpl-bf16": "bf16", "volsmpl-tf32": "tf32"}
+#: benchmark model name -> Volume.pair_decoder (default: the Volume's own)
+PAIR_DECODERS: Dict[str, str] = {"volsmpl-tiles": "tiles", "volsmpl-grouped": "grouped"}
 #: benchmark models whose query runs as one chunk (no memory or cache chunks, no decoder tiles)
 ONE_CHUNK: Tuple[str, ...] = ("volsmpl-onechunk",)
 
@@ -203,7 +208,7 @@ def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optio
     inputs = make_frames(body, batch, cfg.n_points, n_frames, cfg.seed)
     job = {"spec": {"model": model, "dense": dense, "checkpoint": checkpoint, "init_seed": cfg.init_seed,
                     "engine": ENGINES.get(name, "lean"), "precision": PRECISIONS.get(name, "full"),
-                    "one_chunk": name in ONE_CHUNK},
+                    "one_chunk": name in ONE_CHUNK, "pair_decoder": PAIR_DECODERS.get(name)},
            "device": cfg.device, "threads": cfg.threads or torch.get_num_threads(), "warmup": cfg.warmup,
            "repeats": cfg.repeats, "budget_s": cfg.budget_s}
     r = run_job("volsmpl.bench_jobs:volume_job", job, inputs, cfg.timeout_s)

@@ -195,7 +195,8 @@ def is_top_level_op(event) -> bool:
 def build_volume(body, spec: dict):
     """The volume a job measures: spec {'model', 'dense', 'checkpoint' (or None: random init), 'init_seed',
     optional 'engine' (Volume.engine, default 'lean'), optional 'precision' (Volume.set_precision, default 'full'),
-    optional 'one_chunk' (True: every query in one chunk, decoders untiled)}."""
+    optional 'one_chunk' (True: every query in one chunk, decoders untiled), optional 'pair_decoder'
+    (Volume.pair_decoder; None: the Volume's default)}."""
     from .attach import attach_volume
 
     if spec.get("checkpoint"):
@@ -205,6 +206,8 @@ def build_volume(body, spec: dict):
         vol = attach_volume(body, model=spec["model"], pretrained=False, dense=spec["dense"])
     vol.engine = spec.get("engine", "lean")
     vol.set_precision(spec.get("precision", "full"))
+    if spec.get("pair_decoder"):
+        vol.pair_decoder = spec["pair_decoder"]
     if spec["dense"] or spec.get("one_chunk"):
         # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
         # no cache tiling; 'one_chunk' does the same on the sparse path

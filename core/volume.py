@@ -25,7 +25,7 @@ from .boxes import inside_boxes, near_boxes, part_normalization
 from .collision import reduce_penetration
 from .encoding import Encoding, EncodingCache
 from .models import kind_of_network, model_kind
-from .nn.analytic import box_sdf
+from .nn.analytic import box_excess, box_sdf, outside_distance
 from .nn.nbw import group_counts
 from .nn.volsmpl_net import PartCode
 from .partition import Partition
@@ -59,9 +59,10 @@ class Volume(EncodingCache, BodyVolume):
             into equal chunks, only each group's last chunk padded (~9 % of the rows on the benchmark's points),
             one batched matmul per layer per cache tile of 8,192 rows: NBWDecoder.decode_pairs) or 'grouped'
             (one grouped matmul per layer over all pairs, no padding, no tiles: the operator count does not
-            depend on B or on the pairs, volsmpl.nn.grouped; on this 2-core CPU 1.3-2.5x slower than 'tiles', as
-            its activations leave the cache). 'grouped' falls back to 'tiles' where the network or dtype has no
-            grouped matmul (COAP, float64, float32 on CUDA).
+            depend on B or on the pairs, volsmpl.nn.grouped; on the project's AMD EPYC 1.3-2.5x slower than
+            'tiles', as its activations leave the cache; on its Intel Xeon at 60k points, 2026-11-26: 0.85x the
+            query time of 'tiles' on one thread at B = 1, 1.25x on two, equal at B = 8). 'grouped' falls back to
+            'tiles' where the network or dtype has no grouped matmul (COAP, float64, float32 on CUDA).
         precision: the decoders' arithmetic on the sparse path, 'full' (default), 'bf16' or 'tf32' (volsmpl.precision;
             `set_precision`). The dense reference path always runs in full precision.
     """
@@ -215,24 +216,28 @@ class Volume(EncodingCache, BodyVolume):
         return self
 
     def _decode_xin(self, enc: Encoding, xin: torch.Tensor, b: torch.Tensor, kc: torch.Tensor,
-                    counts_host: list | None = None) -> torch.Tensor:
+                    counts_host: list | None = None, group_sorted: bool = False) -> torch.Tensor:
         """Decoder inputs xin (M, 3) of pairs of body b (M,) and code part kc (M,) -> (M,), on the engine
         pair_decoder picks, in `precision` (bf16 always takes the grouped engine, in bfloat16). counts_host: the
-        pairs per (body, code part) group, when known on the host (the tiled decoder then makes no host sync)."""
+        pairs per (body, code part) group, when known on the host (the tiled decoder then makes no host sync).
+        group_sorted: the pairs come sorted by (b, kc) (the grouped engine then needs no sort of its own)."""
         bf16 = self.precision == "bf16"
         with matmul_precision(self.precision, xin.device):
             if not bf16 and not self._grouped_ok(xin):
                 if counts_host is None:
                     return self.net.decode_pairs(xin, b, kc, enc.code)
-                return self.net.decode_pairs(xin, b, kc, enc.code, counts_host=counts_host)
+                return self.net.decode_pairs(xin, b, kc, enc.code, counts_host=counts_host, group_sorted=group_sorted)
             if enc.grouped is None or (torch.is_grad_enabled() and enc.code.z.requires_grad
                                        and not enc.grouped[0].requires_grad):  # made without a graph: remake
                 enc.grouped = self.net.grouped_matrices(enc.code)
             Bc, Kc = enc.code.z.shape[:2]
             group = b * Kc + kc
-            order = torch.argsort(group, stable=True)  # no-op order when the pairs come sorted by (body, part)
             offs = torch.cumsum(group_counts(group, Bc * Kc), 0).to(torch.int32)   # no host sync
-            vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped, torch.bfloat16 if bf16 else None)
+            run = torch.bfloat16 if bf16 else None
+            if group_sorted:
+                return self.net.decode_grouped(xin, offs, enc.code, enc.grouped, run)
+            order = torch.argsort(group, stable=True)
+            vals = self.net.decode_grouped(xin[order], offs, enc.code, enc.grouped, run)
             return torch.empty_like(vals).index_put_((order,), vals)
 
     def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0, outside: bool = True,
@@ -262,10 +267,11 @@ class Volume(EncodingCache, BodyVolume):
             o = t.mean(dim=1, keepdim=True)                                   # (B, 1, 3)
             bias = -(torch.einsum("bki,bkij->bkj", t - o, R) + c).reshape(B, 1, K * 3)
             u = torch.baddbmm(bias, points - o, W).view(B, N, K, 3)           # x_k - c_k, for the box test
-            raw = (u.abs() <= half[:, None]).all(dim=-1)                      # (B, N, K)
+            q, q_max = box_excess(u, half[:, None])                           # (B, N, K, 3), (B, N, K)
+            raw = q_max <= 0                                                  # (B, N, K) point in box k
         grad = torch.is_grad_enabled() and any(x.requires_grad for x in (points, G, box_min, box_max))
         if grad:
-            del u  # formed again below for the pairs and the box-free points only, with autograd
+            del u, q, q_max  # formed again below for the pairs and the box-free points only, with autograd
         inside = raw if enc.slot is None else raw & enc.encoded(K)
         free = ~inside.any(dim=-1)                                            # (B, N)
         n_free_t = free.sum() if outside else torch.zeros((), dtype=torch.long, device=free.device)
@@ -279,7 +285,7 @@ class Volume(EncodingCache, BodyVolume):
         n_free, n_pairs = host.pop(), sum(host)
         Kc = per_group.shape[1]                                               # groups of the whole encoding:
         counts_host = [0] * (b0 * Kc) + host + [0] * ((enc.G.shape[0] - b0 - B) * Kc)
-        b, n, k = torch.nonzero_static(inside, size=n_pairs).unbind(1)
+        b, k, n = torch.nonzero_static(inside.transpose(1, 2), size=n_pairs).unbind(1)   # sorted by (body, part)
         self.decoder_evaluations += n_pairs
         res = points.new_full((B * N,), float("inf")) if not outside else points.new_zeros(B * N)
         if not outside and torch.is_grad_enabled():  # stay in the graph: a gradient of exactly 0 where no point is in a box
@@ -291,15 +297,15 @@ class Volume(EncodingCache, BodyVolume):
             if grad:  # per body: no (F, K, 3, 3) gather of the frames
                 uf = torch.cat([torch.einsum("fki,kij->fkj", points[i, nf[bf == i]][:, None] - t[i], R[i]) - c[i]
                                 for i in range(B)])                           # (F, K, 3), bf is sorted
+                qf, qf_max = box_excess(uf, half[bf])
             else:
-                uf = u[bf, nf]
-            d = box_sdf(uf, -half[bf], half[bf])                              # (F, K)
-            if enc.slot is not None:  # a part without a code is absent inside its box (as in _part_values)
-                d = torch.where(raw[bf, nf], float("inf"), d)
-            res = res.index_put((bf * N + nf,), d.amin(dim=1))
-            del uf, d
+                qf, qf_max = q[bf, nf], q_max[bf, nf]
+            # a part without a code is absent inside its box (as in _part_values)
+            d = outside_distance(qf, qf_max, None if enc.slot is None else raw[bf, nf])   # (F,)
+            res = res.index_put((bf * N + nf,), d)
+            del qf, qf_max, d
         if not grad:
-            del u  # before the decoders: their activations are the query's other large buffers
+            del u, q, q_max  # before the decoders: their activations are the query's other large buffers
         if n_pairs:
             if enc.scale is not None:
                 sc = enc.scale[b0:b0 + B][b, k]
@@ -308,7 +314,7 @@ class Volume(EncodingCache, BodyVolume):
                 xin = ub + c[b, k]
             kc = k if enc.slot is None else enc.slot[k]
             with record_function(DECODER_SCOPE):
-                vals = self._decode_xin(enc, xin, b + b0, kc, counts_host)
+                vals = self._decode_xin(enc, xin, b + b0, kc, counts_host, group_sorted=True)
             if enc.scale is not None:
                 vals = vals * sc[:, 0]
             res = res.scatter_reduce(0, b * N + n, vals, "amin", include_self=False)

@@ -3,7 +3,7 @@ import math
 import pytest
 import torch
 
-from volsmpl.nn.analytic import box_sdf, transform_points, union_box_sdf
+from volsmpl.nn.analytic import box_excess, box_sdf, outside_distance, transform_points, union_box_sdf
 
 
 def _surface_samples(bmin, bmax, n=60):
@@ -90,6 +90,52 @@ def test_union_box_sdf_against_per_box_loop():
     # outside all boxes the union distance is the exact distance to the union of the boxes
     out = ~inside.any(1)
     assert (sdf[out] > 0).all() and (sdf[~out] <= 0).all()
+
+
+def _outside_reference(u, half, absent=None):
+    """float64 min over boxes of the exact box distance (box_sdf of each box, one at a time)."""
+    ref = torch.full(u.shape[:1], float("inf"), dtype=torch.float64)
+    for k in range(u.shape[1]):
+        dk = box_sdf(u[:, k].double(), -half[:, k].double(), half[:, k].double())
+        if absent is not None:
+            dk = torch.where(absent[:, k], float("inf"), dk)
+        ref = torch.minimum(ref, dk)
+    return ref
+
+
+def test_outside_distance_matches_per_box_minimum():
+    g = torch.Generator().manual_seed(3)
+    F, K = 2000, 6
+    half = torch.rand(F, K, 3, generator=g) * 0.2 + 0.02
+    u = torch.randn(F, K, 3, generator=g) * 0.4
+    q, q_max = box_excess(u, half)
+    assert torch.equal(q_max <= 0, (u.abs() <= half).all(-1))      # the membership test it gives
+    free = ~(q_max <= 0).any(-1)
+    assert free.sum() > 500
+    u, half, q, q_max = u[free], half[free], q[free], q_max[free]
+    d = outside_distance(q, q_max)
+    torch.testing.assert_close(d.double(), _outside_reference(u, half), rtol=1e-6, atol=0)
+    # absent parts do not count; all absent is +inf
+    absent = torch.rand(q_max.shape, generator=g) < 0.5
+    absent[0] = True
+    da = outside_distance(q, q_max, absent)
+    ref = _outside_reference(u, half, absent)
+    assert math.isinf(float(da[0])) and math.isinf(float(ref[0]))
+    torch.testing.assert_close(da[1:].double(), ref[1:], rtol=1e-6, atol=0)
+
+
+def test_outside_distance_far_points_and_gradient():
+    half = torch.tensor([[[0.1, 0.2, 0.3], [0.5, 0.5, 0.5]]])         # two boxes, centred (u relative to each)
+    for s in (0.7, 1.0, 1e19, 1e30, 1e37):  # outside both boxes
+        u = torch.tensor([[[s, 0.0, 0.0], [s, 2.0 * s, 0.0]]], requires_grad=True)
+        d = outside_distance(*box_excess(u, half))
+        ref = _outside_reference(u.detach(), half.expand(1, 2, 3))
+        assert torch.isfinite(d).all() and torch.allclose(d.double(), ref, rtol=1e-6)
+        (gu,) = torch.autograd.grad(d.sum(), u)
+        qp = (u.detach().double().abs() - half.double()).clamp(min=0)[0, 0]  # box 0 is the nearest: unit direction
+        assert torch.allclose(gu[0, 0].double(), qp / (qp / s).norm() / s, atol=1e-6)   # away from it and gu[0, 1].abs().max() == 0
+    with pytest.raises(ValueError, match="outside_distance expects"):
+        outside_distance(torch.zeros(4, 3), torch.zeros(4))
 
 
 def test_rigid_transform_preserves_distance():

@@ -327,6 +327,11 @@ def test_group_counts_and_a_layout_from_host_counts():
     a, b = group_pairs(g, 9, 16), group_pairs(g, 9, 16, c, c.tolist())
     for x, y in zip(a[:3], b[:3]):
         assert torch.equal(x, y)
+    # pairs that come sorted by group: the layout without a sort is the one the sort gives
+    gs = g.sort().values
+    a, b = group_pairs(gs, 9, 16), group_pairs(gs, 9, 16, group_sorted=True)
+    for x, y in zip(a[:3], b[:3]):
+        assert torch.equal(x, y)
 
 
 def test_decode_pairs_with_host_counts_equals_without_and_checks_them():

@@ -41,6 +41,49 @@ def box_sdf(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor)
     return outside + inside
 
 
+def box_excess(u: torch.Tensor, half: torch.Tensor) -> torch.Tensor:
+    """Per-axis excess q = |u| - half of points over centred boxes, and its maximum over the axes.
+
+    A point is in (or on) box k when max_axis q <= 0 (the same test as |u| <= half on every axis: the sign of a
+    float difference is exact); q feeds `outside_distance` for the points in no box.
+
+    Shape: u (..., K, 3) coordinates relative to the box centres, half (..., K, 3) half extents (broadcastable)
+    -> q (..., K, 3), q_max (..., K).
+    """
+    q = u.abs() - half
+    return q, torch.maximum(torch.maximum(q[..., 0], q[..., 1]), q[..., 2])
+
+
+def outside_distance(q: torch.Tensor, q_max: torch.Tensor, absent: torch.Tensor | None = None) -> torch.Tensor:
+    """Distance to the nearest of K boxes from points outside all of them: min_k ||max(q_k, 0)|| (`box_excess`).
+
+    Exact and free of overflow for any finite coordinates: with s = min_k max_axis q_k > 0 (every box has an axis
+    the point is beyond), min_k ||q_k^+|| = s sqrt(min_k sum((q_k^+ / s)^2)), and the nearest box's ratio is at most
+    sqrt(3), so only farther boxes can overflow (to inf, which the minimum ignores). s is a constant of the
+    gradient (the value does not depend on it), so the gradient is q^+ / ||q^+|| of the nearest box, finite.
+    absent: (F, K) bool parts that do not count (their distance is +inf; all absent gives +inf).
+
+    Shape: q (F, K, 3), q_max (F, K), both with every q_max > 0 where not absent -> (F,).
+
+    Example:
+        >>> q, q_max = box_excess(torch.tensor([[[3.0, 0.0, 4.0]]]), torch.zeros(1, 1, 3))
+        >>> outside_distance(q, q_max)
+        tensor([5.])
+    """
+    if q.dim() != 3 or q.shape[-1] != 3 or q_max.shape != q.shape[:2]:
+        raise ValueError(f"outside_distance expects q (F, K, 3) and q_max (F, K), got {tuple(q.shape)} and "
+                         f"{tuple(q_max.shape)}")
+    if absent is not None:
+        q_max = torch.where(absent, float("inf"), q_max)
+    s = q_max.amin(dim=-1, keepdim=True).detach()                       # (F, 1), > 0
+    w = q.clamp(min=0.0) / s[..., None]
+    w = w * w
+    r2 = w[..., 0] + w[..., 1] + w[..., 2]                              # (F, K), >= 1 at the nearest box
+    if absent is not None:
+        r2 = torch.where(absent, float("inf"), r2)
+    return s[:, 0] * r2.amin(dim=-1).sqrt()
+
+
 def transform_points(T: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     """Apply 4x4 transforms to points.
 

@@ -100,7 +100,7 @@ def group_counts(group: torch.Tensor, n_groups: int) -> torch.Tensor:
 
 
 def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional[torch.Tensor] = None,
-                counts_host: Optional[list] = None) -> PairLayout:
+                counts_host: Optional[list] = None, group_sorted: bool = False) -> PairLayout:
     """Sort pairs by group and cut every group into chunks of ``chunk`` rows (last one padded).
 
     Each chunk holds pairs of a single group, so a layer is one batched matmul over chunks with
@@ -112,6 +112,8 @@ def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional
         chunk: rows per chunk (>= 1).
         counts, counts_host: `group_counts(group, n_groups)` and its values as a list, when the caller has them
             (the layout then needs no host sync of its own; else one, for the number of chunks).
+        group_sorted: the caller guarantees `group` is non-decreasing (no sort is made; unsorted input then gives
+            a wrong layout).
     Returns:
         :class:`PairLayout`.
     """
@@ -121,8 +123,8 @@ def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional
     n_chunks = (counts + (chunk - 1)) // chunk                          # (G,)
     chunk_start = torch.cumsum(n_chunks, 0) - n_chunks
     group_start = torch.cumsum(counts, 0) - counts
-    order = torch.argsort(group, stable=True)                           # (M,)
-    gs = group[order]
+    order = torch.arange(M, device=dev) if group_sorted else torch.argsort(group, stable=True)   # (M,)
+    gs = group if group_sorted else group[order]
     rank = torch.arange(M, device=dev) - group_start[gs]
     slot_sorted = (chunk_start[gs] + torch.div(rank, chunk, rounding_mode="floor")) * chunk + rank % chunk
     slot = torch.empty_like(slot_sorted)
@@ -339,7 +341,8 @@ class NBWDecoder(nn.Module):
         return h.squeeze(-1) if self.out_dim == 1 else h
 
     def decode_pairs(self, x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor,
-                     gen: NBWWeights, chunk: Optional[int] = None, counts_host: Optional[list] = None) -> torch.Tensor:
+                     gen: NBWWeights, chunk: Optional[int] = None, counts_host: Optional[list] = None,
+                     group_sorted: bool = False) -> torch.Tensor:
         """Evaluate each point only with its own (body, part) decoder.
 
         Pairs are grouped by (body, part) and cut into equal chunks (:func:`group_pairs`), so every
@@ -355,6 +358,7 @@ class NBWDecoder(nn.Module):
             counts_host: pairs per (body, part) group (B * K ints, body-major) when the caller holds them on the
                 host already (the lean query counts them in its one sync): the indices are then taken as in
                 range and the call makes no host sync; without it, two (bounds, then the layout).
+            group_sorted: the caller guarantees the pairs are sorted by (body, part) (`group_pairs` skips its sort).
         Returns:
             (M,) signed distances (out_dim == 1) or (M, out_dim).
         """
@@ -373,7 +377,7 @@ class NBWDecoder(nn.Module):
             counts_host = counts.tolist()  # the layout's host sync: chunk size and number of chunks from it
         if chunk is None:
             chunk = default_chunk(M, sum(c > 0 for c in counts_host))
-        lay = group_pairs(group, G, int(chunk), counts, counts_host)
+        lay = group_pairs(group, G, int(chunk), counts, counts_host, group_sorted)
         n_chunks = lay.chunk_group.shape[0]
 
         xs = x_local[lay.src].view(n_chunks, lay.chunk, 3)

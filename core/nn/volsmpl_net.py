@@ -58,10 +58,12 @@ class VolumetricSMPLNet(nn.Module):
         return self.decoder.decode_dense(x_local, code.weights)
 
     def decode_pairs(self, x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.Tensor, code: PartCode,
-                     counts_host: list | None = None) -> torch.Tensor:
+                     counts_host: list | None = None, group_sorted: bool = False) -> torch.Tensor:
         """x_local (M, 3) in the frame of part part_idx of body body_idx -> (M,); counts_host: pairs per (body,
-        part) group when the caller holds them (NBWDecoder.decode_pairs: then no host sync)."""
-        return self.decoder.decode_pairs(x_local, body_idx, part_idx, code.weights, counts_host=counts_host)
+        part) group when the caller holds them (NBWDecoder.decode_pairs: then no host sync); group_sorted: the
+        caller guarantees the pairs come sorted by (body, part) (no sort)."""
+        return self.decoder.decode_pairs(x_local, body_idx, part_idx, code.weights, counts_host=counts_host,
+                                         group_sorted=group_sorted)
 
     def grouped_supported(self, dtype: torch.dtype, device=None) -> bool:
         """Whether `decode_grouped` runs in `dtype` on `device` (volsmpl.nn.grouped)."""
