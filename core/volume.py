@@ -275,7 +275,8 @@ class Volume(EncodingCache, BodyVolume):
         inside = raw if enc.slot is None else raw & enc.encoded(K)
         free = ~inside.any(dim=-1)                                            # (B, N)
         n_free_t = free.sum() if outside else torch.zeros((), dtype=torch.long, device=free.device)
-        per_group = inside.sum(dim=1)                                         # (B, K) pairs per (body, part)
+        by_part = inside.transpose(1, 2).contiguous()                         # (B, K, N): pairs come sorted by (body, part)
+        per_group = by_part.sum(dim=2)                                        # (B, K) pairs per (body, part)
         if enc.slot is not None:
             per_group = per_group[:, enc.parts]                               # in the code's part order
         extra = [] if nonfinite is None else [nonfinite[0].reshape(1)]
@@ -285,7 +286,8 @@ class Volume(EncodingCache, BodyVolume):
         n_free, n_pairs = host.pop(), sum(host)
         Kc = per_group.shape[1]                                               # groups of the whole encoding:
         counts_host = [0] * (b0 * Kc) + host + [0] * ((enc.G.shape[0] - b0 - B) * Kc)
-        b, k, n = torch.nonzero_static(inside.transpose(1, 2), size=n_pairs).unbind(1)   # sorted by (body, part)
+        b, k, n = torch.nonzero_static(by_part, size=n_pairs).unbind(1)
+        del by_part
         self.decoder_evaluations += n_pairs
         res = points.new_full((B * N,), float("inf")) if not outside else points.new_zeros(B * N)
         if not outside and torch.is_grad_enabled():  # stay in the graph: a gradient of exactly 0 where no point is in a box

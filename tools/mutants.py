@@ -114,7 +114,7 @@ MUTANTS = {
                                            [T + "test_motion_stats.py::test_interval_matches_normal_theory_on_a_large_sample"]),
     # the lean query's pairs sorted by (body, part) (decoders skip their sort) and its box distances (2026-11-26)
     "lean_pairs_in_point_order": ("core/volume.py",
-                                  "b, k, n = torch.nonzero_static(inside.transpose(1, 2), size=n_pairs).unbind(1)",
+                                  "b, k, n = torch.nonzero_static(by_part, size=n_pairs).unbind(1)",
                                   "b, n, k = torch.nonzero_static(inside, size=n_pairs).unbind(1)",
                                   [T + "test_volume.py::test_engines_equal_dense_values_and_gradients"]),
     "outside_distance_to_the_farthest_box": ("core/nn/analytic.py", "r2.amin(dim=-1).sqrt()", "r2.nan_to_num(posinf=0.0).amax(dim=-1).sqrt()",
