@@ -76,6 +76,29 @@ def test_compared_runs_tuned_protocol_takes_the_choice_on_test_rooms():
     assert {r["w"] for r in runs["coap (w 0.1)"]} == {0.1} and len(runs["coap (w 0.1)"]) == 4
 
 
+@pytest.mark.parametrize("coap_ws", [(0.01, 0.1, 1.0), (0.01, 1.0)])
+def test_summary_and_paired_rows_are_the_same_runs(coap_ws):
+    """The paper's protocol: summary.coap (Table 5's row) and the paired table's COAP row are the same weight, w =
+    0.1 when swept, else the first; a model with one weight is compared at it."""
+    from volsmpl.apps.motion.summary import compared_weight, paper_summary
+    weights = {"volsmpl": [1.0], "coap": list(coap_ws)}
+    keys = ("goal_dist_m", "collision_obstacles_cm", "collision_frames_pct", "foot_skate_cm", "max_depth_cm",
+            "jerk_max", "path_m", "optim_s", "ms_per_iter")
+    records = {(m, w): [{"scene": "r", "metrics": {"collision_cm": 10 * w, "optim_peak_mem_mb": 1.0,
+                                                   **dict.fromkeys(keys, 0.0)}}]
+               for m, ws in weights.items() for w in ws}
+    cost = {"mem_per_frame_fwd_mb": 1.0, "mem_per_frame_fwdbwd_mb": 1.0, "ms_per_frame_fwd": 1.0,
+            "ms_per_frame_fwdbwd": 1.0, "memory_kind": "rss"}
+    summary = paper_summary(records, {m: cost for m in weights}, {m: 1 for m in weights}, weights)
+    expect = 0.1 if 0.1 in coap_ws else coap_ws[0]
+    assert compared_weight("coap", coap_ws) == expect and summary["coap"]["w"] == expect
+    assert summary["coap"]["collision_cm"] == pytest.approx(10 * expect) and summary["volsmpl"]["w"] == 1.0
+    cases = [_rec(m, w, "r", 0) for m, ws in weights.items() for w in ws]
+    runs = S.compared_runs({"cases": cases, "config": {"models": ["volsmpl", "coap"], "weights": weights}})
+    assert {r["w"] for r in runs[f"coap (w {expect:g})"]} == {expect}
+    assert compared_weight("coap", coap_ws, {"coap": 1.0}) == 1.0      # a choice on tuning rooms wins
+
+
 def test_cli_errors_are_one_line(tmp_path, capsys):
     bad = tmp_path / "r.json"
     bad.write_text("{}")

@@ -28,8 +28,8 @@ from dataclasses import asdict
 import numpy as np
 import torch
 
-from .summary import cost_columns, fit_budget, format_table, paper_summary, tuned_rows, tuned_summary, wkey
 from .stats import compared_runs, format_pairs, paired_differences
+from .summary import cost_columns, fit_budget, format_table, paper_summary, tuned_rows, tuned_summary, wkey
 from .tuning import choose_weights, split_scenes
 
 PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}

@@ -24,7 +24,7 @@ from scipy import stats
 
 from volsmpl.outputs import write_atomic
 
-from .summary import TABLE5_COAP_W
+from .summary import compared_weight
 
 #: the outcome metrics compared (lower is better for each)
 METRICS = ("collision_cm", "collision_frames_pct", "goal_dist_m", "foot_skate_cm")
@@ -92,12 +92,10 @@ def compared_runs(result: dict) -> dict:
     models = (result.get("config") or {}).get("models") or sorted({c["model"] for c in cases})
     weights = (result.get("config") or {}).get("weights") or {}
     runs = {}
+    choice = tuning.get("choice") or {}
     for m in models:
-        if tuning.get("choice") and m in tuning["choice"]:
-            w, scenes = float(tuning["choice"][m]), set(tuning["test_scenes"])
-        else:
-            ws = [float(x) for x in weights.get(m, [1.0])]
-            w, scenes = (TABLE5_COAP_W if TABLE5_COAP_W in ws else ws[0]), None
+        w = compared_weight(m, weights.get(m, [1.0]), choice)
+        scenes = set(tuning["test_scenes"]) if m in choice else None
         recs = [c for c in cases if c["model"] == m and float(c["w"]) == w and (scenes is None or c["scene"] in scenes)]
         if recs:
             runs[f"{m}" if len(weights.get(m, [w])) == 1 else f"{m} (w {w:g})"] = recs

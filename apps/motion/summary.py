@@ -20,6 +20,15 @@ def wkey(model: str, w: float) -> str:
     return f"{model}_w{s if '.' in s else s + '.0'}"
 
 
+def compared_weight(model: str, weights: list, choice: dict | None = None) -> float:
+    """The weight of the row that compares `model` with the others: its choice on the tuning rooms when `choice`
+    (model -> weight) has one, else Table 5's: COAP's w = 0.1 when swept, otherwise the first of `weights`."""
+    if choice and model in choice:
+        return float(choice[model])
+    ws = [float(w) for w in weights]
+    return TABLE5_COAP_W if TABLE5_COAP_W in ws else ws[0]
+
+
 def _mean(xs):
     """Mean of the finite values of xs; None when there are none."""
     xs = [x for x in xs if x is not None and np.isfinite(x)]
@@ -76,17 +85,16 @@ def _row(recs: list, cost: dict, coll_frames, w: float, **extra) -> dict:
 
 
 def paper_summary(records: dict, costs: dict, coll_frames: dict, weights: dict) -> dict:
-    """The paper's protocol (every weight on every room): summary.<model> (Table 5: COAP at w = 0.1, or its first
-    weight without 0.1) and summary.<model>_w<w> (Table D.1's sweep; VolumetricSMPL's w = 1 row beside it)."""
+    """The paper's protocol (every weight on every room): summary.<model> at `compared_weight` (Table 5: COAP at
+    w = 0.1, or its first weight without 0.1) and summary.<model>_w<w> (Table D.1's sweep; VolumetricSMPL's w = 1
+    row beside it)."""
     summary = {}
     for (m, w), recs in records.items():
         s = _row(recs, costs[m], coll_frames[m], w)
-        if len(weights[m]) == 1 or (m == "coap" and w == TABLE5_COAP_W):
+        if w == compared_weight(m, weights[m]):
             summary[m] = s
         if m == "coap" or (m == "volsmpl" and w == 1.0):
             summary[wkey(m, w)] = dict(s)
-    if "coap" in weights and "coap" not in summary:   # a sweep without 0.1: Table 5's row is its first weight
-        summary["coap"] = dict(summary[wkey("coap", weights["coap"][0])])
     return summary
 
 
