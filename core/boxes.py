@@ -10,6 +10,25 @@ def inside_boxes(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Te
     return ((x_local >= box_min[:, :, None]) & (x_local <= box_max[:, :, None])).all(dim=-1)
 
 
+def box_centred(points: torch.Tensor, G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
+    """Every point in every part's box-centred frame, u = R_k^T (x - t_k) - c_k, by one batched matmul, and the
+    boxes' half extents. The product is taken about each body's mean part origin o (x - o, t_k - o), so that
+    world-sized coordinates cancel before the rounding.
+
+    Shape: points (B, N, 3), G (B, K, 4, 4) part-to-world, box_min/max (B, K, 3) in part frames -> u (B, N, K, 3)
+    (each point's K parts contiguous), half (B, K, 3). Use with nn.analytic.box_excess (membership: max_axis
+    |u| - half <= 0).
+    """
+    B, K = G.shape[:2]
+    R, t = G[..., :3, :3], G[..., :3, 3]                                  # (B, K, 3, 3), (B, K, 3)
+    c = 0.5 * (box_min + box_max)
+    W = R.permute(0, 2, 1, 3).reshape(B, 3, K * 3)                        # row x @ R_k = (R_k^T x)^T
+    o = t.mean(dim=1, keepdim=True)                                       # (B, 1, 3)
+    bias = -(torch.einsum("bki,bkij->bkj", t - o, R) + c).reshape(B, 1, K * 3)
+    u = torch.baddbmm(bias, points - o, W).view(B, points.shape[1], K, 3)
+    return u, 0.5 * (box_max - box_min)
+
+
 def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Similarity that maps each padded part box into [-1, 1]^3 along its longest side: centre (B, K, 3) and
     isotropic scale (B, K, 1) = half the longest side. Decoders of normalised models read (x_k - c) / s and

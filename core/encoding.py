@@ -15,9 +15,9 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from .boxes import inside_boxes
+from .boxes import box_centred
+from .nn.analytic import box_excess
 from .nn.volsmpl_net import PartCode
-from .partition import Partition
 from .tensor_fingerprint import fingerprint
 from .volume_api import check_output
 
@@ -69,7 +69,7 @@ def _detached(field):
 
 
 class EncodingCache:
-    """The encoding cache of a Volume: needs the Volume's `_encode`, `_frames`, `_chunks`, `num_parts`, `_last`
+    """The encoding cache of a Volume: needs the Volume's `_encode`, `_frames`, `_lean_chunks`, `num_parts`, `_last`
     (the last constant encoding, None at first) and `training`."""
 
     def encode(self, out, generator: torch.Generator | None = None, fresh: bool = False) -> Encoding:
@@ -144,9 +144,10 @@ class EncodingCache:
         """(K,) bool: parts whose padded box holds at least one of the points (B, N, 3) of some body."""
         need = torch.zeros(self.num_parts, dtype=torch.bool, device=G.device)
         B, N = points.shape[:2]
-        for s, e in self._chunks(B, N):
-            x = Partition.canonicalize(points[:, s:e].detach(), G.detach())
-            need |= inside_boxes(x, box_min.detach(), box_max.detach()).any(dim=2).any(dim=0)
+        G, box_min, box_max = G.detach(), box_min.detach(), box_max.detach()
+        for b0, b1, s, e in self._lean_chunks(B, N, G.device):
+            u, half = box_centred(points[b0:b1, s:e].detach(), G[b0:b1], box_min[b0:b1], box_max[b0:b1])
+            need |= (box_excess(u, half[:, None])[1] <= 0).any(dim=1).any(dim=0)   # (K,); NaN points hold none
         return need
 
     def _cached(self, out, key: tuple | None = None) -> Encoding | None:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import torch
 from torch.profiler import record_function
 
-from .boxes import inside_boxes, near_boxes, part_normalization
+from .boxes import box_centred, inside_boxes, near_boxes, part_normalization
 from .collision import reduce_penetration
 from .encoding import Encoding, EncodingCache
 from .models import kind_of_network, model_kind
@@ -262,11 +262,7 @@ class Volume(EncodingCache, BodyVolume):
         c = 0.5 * (box_min + box_max)                                         # (B, K, 3)
         half = 0.5 * (box_max - box_min)
         with torch.no_grad():
-            W = R.permute(0, 2, 1, 3).reshape(B, 3, K * 3)                    # row x @ R_k = (R_k^T x)^T
-            # about the body's own origin o (mean part origin): x @ R - t @ R would cancel world-sized terms
-            o = t.mean(dim=1, keepdim=True)                                   # (B, 1, 3)
-            bias = -(torch.einsum("bki,bkij->bkj", t - o, R) + c).reshape(B, 1, K * 3)
-            u = torch.baddbmm(bias, points - o, W).view(B, N, K, 3)           # x_k - c_k, for the box test
+            u = box_centred(points, G, box_min, box_max)[0]                   # (B, N, K, 3) x_k - c_k, for the box test
             q, q_max = box_excess(u, half[:, None])                           # (B, N, K, 3), (B, N, K)
             raw = q_max <= 0                                                  # (B, N, K) point in box k
         grad = torch.is_grad_enabled() and any(x.requires_grad for x in (points, G, box_min, box_max))

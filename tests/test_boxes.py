@@ -100,3 +100,25 @@ def test_near_boxes_keeps_every_point_in_a_box_and_packs_exactly():
     pts2[0, 150:170] = 10.0
     _, rows2, valid2 = near_boxes(pts2, G, lo, hi)
     assert valid2[0].sum() == K * 40 - 20 and valid2[1:].all() and not valid2[0, -20:].any()
+
+
+def test_box_centred_coordinates_and_membership_far_from_the_origin():
+    """box_centred + box_excess against the part-frame formula in float64, for bodies 10 km from the origin (the
+    product is taken about the body's own origin, so float32 keeps sub-millimetre coordinates there)."""
+    from volsmpl.boxes import box_centred
+    from volsmpl.nn.analytic import box_excess
+    K, N = 5, 400
+    G, lo, hi = _random_boxes(K, 7)
+    G[:, :3, 3] += torch.tensor([10000.0, -5000.0, 2500.0], dtype=torch.float64)
+    g = torch.Generator().manual_seed(0)
+    x = G[:, :3, 3].mean(0) + torch.randn(N, 3, generator=g, dtype=torch.float64)
+    G, lo, hi, x = (a.float().double() for a in (G, lo, hi, x))   # the float32 inputs, exactly
+    ref = torch.einsum("kji,nkj->nki", G[:, :3, :3], x[:, None] - G[:, :3, 3]) - 0.5 * (lo + hi)   # R^T (x - t) - c
+    u, half = box_centred(x[None].float(), G[None].float(), lo[None].float(), hi[None].float())
+    assert u.shape == (1, N, K, 3) and torch.allclose(half[0].double(), 0.5 * (hi - lo), atol=1e-7)
+    assert (u[0].double() - ref).abs().max() < 1e-5            # x R - t R in float32 at 10 km would be off by ~1e-3
+    inside = (ref.abs() <= 0.5 * (hi - lo)).all(-1)
+    member = box_excess(u, half[:, None])[1][0] <= 0
+    near = (ref.abs() - 0.5 * (hi - lo)).abs().amin(-1) < 1e-3   # within rounding of a face: either answer
+    assert inside.any() and (~inside).any()
+    assert torch.equal(member[~near], inside[~near])

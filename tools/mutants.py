@@ -117,6 +117,8 @@ MUTANTS = {
                                   "b, k, n = torch.nonzero_static(by_part, size=n_pairs).unbind(1)",
                                   "b, n, k = torch.nonzero_static(inside, size=n_pairs).unbind(1)",
                                   [T + "test_volume.py::test_engines_equal_dense_values_and_gradients"]),
+    "box_centred_about_the_world_origin": ("core/boxes.py", "    o = t.mean(dim=1, keepdim=True)", "    o = 0 * t.mean(dim=1, keepdim=True)",
+                                           [T + "test_boxes.py::test_box_centred_coordinates_and_membership_far_from_the_origin"]),
     "outside_distance_to_the_farthest_box": ("core/nn/analytic.py", "r2.amin(dim=-1).sqrt()", "r2.nan_to_num(posinf=0.0).amax(dim=-1).sqrt()",
                                              [T + "test_nn_analytic.py::test_outside_distance_matches_per_box_minimum",
                                               T + "test_volume.py::test_far_points_skip_network_and_are_exact"]),
