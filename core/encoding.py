@@ -112,12 +112,14 @@ class EncodingCache:
         if not (out.vertices.requires_grad or out.joints.requires_grad or out.full_pose.requires_grad):
             self._last = enc  # may answer an equal new constant output (value reuse)
 
-    def _encoding_for(self, out, points: torch.Tensor, frames=None) -> Encoding:
+    def _encoding_for(self, out, points: torch.Tensor, frames=None, holding=None) -> Encoding:
         """An encoding of `out` that answers queries at `points` (B, N, 3): the cached one when it has a code
         for every part whose padded box holds a point, else a new one of those parts (and the cached
         ones), cached in turn. A part whose box holds no point only contributes its analytic box
         distance, so encoding it would change nothing: queries near a few parts (a hand and an object)
-        run the encoder on those parts only. frames: `_frames(out)` when the caller has them."""
+        run the encoder on those parts only. frames: `_frames(out)` when the caller has them. holding: a function
+        (G, box_min, box_max) -> (K,) bool of the parts whose box holds a point, in place of `_parts_holding`
+        (the lean query's, which keeps its box test for the query)."""
         check_output(out)
         key = None if self.training else self.cache_key(out)
         enc = None if self.training else self._cached(out, key)
@@ -127,7 +129,7 @@ class EncodingCache:
             frames = (enc.G, enc.box_min, enc.box_max)
         elif frames is None:
             frames = self._frames(out)
-        need = self._parts_holding(points, *frames)
+        need = self._parts_holding(points, *frames) if holding is None else holding(*frames)
         if enc is not None:
             have = enc.encoded(self.num_parts)
             if not (need & ~have).any():

@@ -799,3 +799,39 @@ def test_queries_encode_only_parts_holding_points(model):
         d_far = vol.query(out2, far)  # no point in any box: no encoder run, the analytic distance
         assert encoded == [] and torch.isfinite(d_far).all()
         torch.testing.assert_close(d_far, vol.query_encoded(vol._encode(out2, None), far))
+
+
+def test_lean_query_tests_the_boxes_once_for_encoding_and_query(monkeypatch):
+    """On a new output, `query` and `collision_loss` pick the parts to encode with the box test the lean query then
+    uses (one test, not two); values and gradients equal those with the test made again (the holder ignored)."""
+    import volsmpl.lean_query as LQ
+    b = volsmpl.create_body()
+    vol = volsmpl.attach_volume(b).eval()
+    p = random_pose(1, seed=5)
+    hand = torch.nonzero(vol.partition.vertex_labels == vol.partition.table.part_names.index("left_hand"))[:, 0]
+    calls = []
+    real = LQ.box_centred
+    monkeypatch.setattr(LQ, "box_centred", lambda *a: calls.append(a[0].shape) or real(*a))
+
+    def run(reuse):
+        q = {k: v.clone().requires_grad_() for k, v in p.items()}
+        out = b(**q)
+        pts = (out.vertices[:, hand[::3]] + 0.01).detach()
+        if not reuse:
+            monkeypatch.setattr(LQ.LeanQuery, "_query_lean", lambda self, *a: real_lean(self, *a[:5]))
+        calls.clear()
+        d = vol.query(out, pts)
+        n_query = len(calls)
+        loss = vol.collision_loss(b(**q), pts, reduction="sum")
+        g = torch.autograd.grad(d.sum() + loss, q["body_pose"])[0]
+        return d.detach(), loss.detach(), g, n_query, len(calls)
+
+    real_lean = LQ.LeanQuery._query_lean
+    d1, l1, g1, n1, m1 = run(True)
+    assert (n1, m1) == (1, 2)                   # one test per call (the encoding's; the query reused it)
+    d2, l2, g2, n2, m2 = run(False)
+    assert (n2, m2) == (2, 4)                   # without the holder each call tests twice
+    torch.testing.assert_close(d1, d2, rtol=0, atol=0)
+    torch.testing.assert_close(l1, l2, rtol=0, atol=0)
+    torch.testing.assert_close(g1, g2, rtol=0, atol=0)
+    assert (d1 < 0).any() and l1 > 0

@@ -99,7 +99,7 @@ MUTANTS = {
     "gpu_boxes_upper_bound_is_min": ("core/partition.py", 'scatter_reduce(1, idx, local, "amax", include_self=False)',
                                      'scatter_reduce(1, idx, local, "amin", include_self=False)',
                                      [T + "test_partition.py::test_boxes_contain_part_vertices"]),
-    "gpu_lean_chunks_follow_chunk_elems": ("core/volume.py", "if cpu else self.gpu_chunk_elems", "if cpu else self.chunk_elems",
+    "gpu_lean_chunks_follow_chunk_elems": ("core/lean_query.py", "if cpu else self.gpu_chunk_elems", "if cpu else self.chunk_elems",
                                            [T + "test_volume.py::test_lean_chunks_one_body_per_chunk_on_the_cpu"]),
     "chain_by_depth_wrong_parent": ("core/body/lbs.py", "glob[:, idx] = glob[:, pidx] @ rot_mats[:, idx]",
                                     "glob[:, idx] = rot_mats[:, pidx] @ rot_mats[:, idx]",
@@ -113,7 +113,7 @@ MUTANTS = {
                                            "confidence_level=confidence / 2,",
                                            [T + "test_motion_stats.py::test_interval_matches_normal_theory_on_a_large_sample"]),
     # the lean query's pairs sorted by (body, part) (decoders skip their sort) and its box distances (2026-11-26)
-    "lean_pairs_in_point_order": ("core/volume.py",
+    "lean_pairs_in_point_order": ("core/lean_query.py",
                                   "b, k, n = torch.nonzero_static(by_part, size=n_pairs).unbind(1)",
                                   "b, n, k = torch.nonzero_static(inside, size=n_pairs).unbind(1)",
                                   [T + "test_volume.py::test_engines_equal_dense_values_and_gradients"]),
