@@ -11,12 +11,12 @@ drift over minutes falls on both versions alike when they alternate (the README'
 """
 import argparse
 import statistics
-import time
 
 import torch
 
 import volsmpl
 from volsmpl.bench_jobs import make_frames
+from volsmpl.meter import timed_ms
 
 
 def main() -> None:
@@ -40,23 +40,12 @@ def main() -> None:
 
         for f in range(min(2, a.frames)):
             full(f)
-        t_full = []
-        for _ in range(a.rounds):
-            for f in range(a.frames):
-                t = time.perf_counter()
-                full(f)
-                t_full.append(time.perf_counter() - t)
+        t_full = timed_ms([lambda f=f: full(f) for _ in range(a.rounds) for f in range(a.frames)], "cpu")
         enc = vol.encode(outs[0], fresh=True)
-        for _ in range(2):
-            vol.query_encoded(enc, fr["points"][0])
-        t_query = []
-        for _ in range(15):
-            t = time.perf_counter()
-            vol.query_encoded(enc, fr["points"][0])
-            t_query.append(time.perf_counter() - t)
-    ms = 1e3 / a.batch
-    print(f"{a.label} B={a.batch} t/body {statistics.median(t_full) * ms:.1f} ms  "
-          f"t query/body {statistics.median(t_query) * ms:.1f} ms")
+        query = lambda: vol.query_encoded(enc, fr["points"][0])
+        t_query = timed_ms([query] * 17, "cpu")[2:]                   # 2 warm-up calls
+    print(f"{a.label} B={a.batch} t/body {statistics.median(t_full) / a.batch:.1f} ms  "
+          f"t query/body {statistics.median(t_query) / a.batch:.1f} ms")
 
 
 if __name__ == "__main__":
