@@ -50,7 +50,7 @@ session)  # the engine's CUDA paths first (tests), then its figures; each step b
     step profile 60 python3 docs/scripts/cuda_profile.py --device cuda --batch 1 8 --out "$W/prof"
     cp "$W/prof/cuda_profile.txt" "$OUT"/ 2>/dev/null
     step graphs 40 python3 docs/scripts/cuda_graphs_probe.py --batch 1 8
-    step selfpen_cuda 60 $V selfpen --device cuda --model volsmpl,coap --render 0 --out "$W/selfpen"
+    step selfpen_cuda 150 $V selfpen --device cuda --model volsmpl,coap --render 0 --out "$W/selfpen"
     cp "$W/selfpen/results.json" "$OUT/selfpen_results.json" 2>/dev/null
     step motion_cost 75 $V motion --device cuda --model volsmpl,coap,mesh --scenes 1 --sequences 1 --iters 1 \
         --render 0 --published-cost --out "$W/motion"
