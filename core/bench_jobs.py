@@ -196,7 +196,7 @@ def build_volume(body, spec: dict):
     """The volume a job measures: spec {'model', 'dense', 'checkpoint' (or None: random init), 'init_seed',
     optional 'engine' (Volume.engine, default 'lean'), optional 'precision' (Volume.set_precision, default 'full'),
     optional 'one_chunk' (True: every query in one chunk, decoders untiled), optional 'pair_decoder'
-    (Volume.pair_decoder; None: the Volume's default)}."""
+    (Volume.pair_decoder; None: the Volume's default), optional 'cuda_graphs' (Volume.cuda_graphs)}."""
     from .attach import attach_volume
 
     if spec.get("checkpoint"):
@@ -208,6 +208,7 @@ def build_volume(body, spec: dict):
     vol.set_precision(spec.get("precision", "full"))
     if spec.get("pair_decoder"):
         vol.pair_decoder = spec["pair_decoder"]
+    vol.cuda_graphs = bool(spec.get("cuda_graphs", False))
     if spec["dense"] or spec.get("one_chunk"):
         # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
         # no cache tiling; 'one_chunk' does the same on the sparse path

@@ -25,7 +25,8 @@ PAPER = paper.bench_paper()
 #: (numerator, denominator) model pairs whose time and memory ratios are reported per batch size
 RATIO_PAIRS = [("coap", "volsmpl"), ("coap-sparse", "volsmpl"), ("volsmpl-dense", "volsmpl"), ("coap", "coap-sparse"),
                ("volsmpl-chunked", "volsmpl"), ("volsmpl", "volsmpl-bf16"), ("volsmpl", "volsmpl-tf32"),
-               ("coap", "volsmpl-bf16"), ("coap", "volsmpl-tf32"), ("volsmpl-onechunk", "volsmpl")]
+               ("coap", "volsmpl-bf16"), ("coap", "volsmpl-tf32"), ("volsmpl-onechunk", "volsmpl"),
+               ("volsmpl", "volsmpl-graphs"), ("coap", "volsmpl-graphs")]
 
 
 # ---------------------------------------------------------------------------------------------- ratios

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import torch
 
+from .nn.analytic import box_excess
+
 
 def inside_boxes(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor) -> torch.Tensor:
     """x_local (B, K, N, 3) in part frames, box_min/max (B, K, 3) -> (B, K, N) bool (closed boxes)."""
@@ -27,6 +29,22 @@ def box_centred(points: torch.Tensor, G: torch.Tensor, box_min: torch.Tensor, bo
     bias = -(torch.einsum("bki,bkij->bkj", t - o, R) + c).reshape(B, 1, K * 3)
     u = torch.baddbmm(bias, points - o, W).view(B, points.shape[1], K, 3)
     return u, 0.5 * (box_max - box_min)
+
+
+@torch.no_grad()
+def box_test(points: torch.Tensor, G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
+    """Every point in every part's box-centred frame and its excess over the box, without autograd.
+
+    Shape: points (B, N, 3), G (B, K, 4, 4), box_min/max (B, K, 3) -> u (B, N, K, 3) (box_centred), q (B, N, K, 3)
+    and q_max (B, N, K) (nn.analytic.box_excess: the point is in the box where q_max <= 0; NaN points in none).
+    Use with parts_holding."""
+    u, half = box_centred(points, G, box_min, box_max)
+    return (u, *box_excess(u, half[:, None]))
+
+
+def parts_holding(q_max: torch.Tensor) -> torch.Tensor:
+    """(K,) bool: the parts whose box holds at least one point of some body, from box_test's q_max (B, N, K)."""
+    return (q_max <= 0).any(dim=1).any(dim=0)
 
 
 def part_normalization(box_min: torch.Tensor, box_max: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

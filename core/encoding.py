@@ -15,8 +15,7 @@ from dataclasses import dataclass, replace
 
 import torch
 
-from .boxes import box_centred
-from .nn.analytic import box_excess
+from .boxes import box_test, parts_holding
 from .nn.volsmpl_net import PartCode
 from .tensor_fingerprint import fingerprint
 from .volume_api import check_output
@@ -148,8 +147,7 @@ class EncodingCache:
         B, N = points.shape[:2]
         G, box_min, box_max = G.detach(), box_min.detach(), box_max.detach()
         for b0, b1, s, e in self._lean_chunks(B, N, G.device):
-            u, half = box_centred(points[b0:b1, s:e].detach(), G[b0:b1], box_min[b0:b1], box_max[b0:b1])
-            need |= (box_excess(u, half[:, None])[1] <= 0).any(dim=1).any(dim=0)   # (K,); NaN points hold none
+            need |= parts_holding(box_test(points[b0:b1, s:e].detach(), G[b0:b1], box_min[b0:b1], box_max[b0:b1])[2])
         return need
 
     def _cached(self, out, key: tuple | None = None) -> Encoding | None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import torch
 from torch.profiler import record_function
 
-from .boxes import box_centred
+from .boxes import box_test, parts_holding
 from .encoding import Encoding
 from .nn.analytic import box_excess, outside_distance
 from .query_chunks import lean_chunks
@@ -18,14 +18,6 @@ from .validate import nonfinite_points_error
 
 #: profiler scope of the decoder evaluations of a query (volsmpl bench times the decoder alone by it)
 DECODER_SCOPE = "volsmpl::decoder"
-
-
-@torch.no_grad()
-def _box_test(points: torch.Tensor, G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
-    """points (B, N, 3) in every part's box-centred frame and their excess over the boxes, without autograd:
-    u (B, N, K, 3), q (B, N, K, 3), q_max (B, N, K) (boxes.box_centred, nn.analytic.box_excess)."""
-    u, half = box_centred(points, G, box_min, box_max)
-    return (u, *box_excess(u, half[:, None]))
 
 
 class LeanQuery:
@@ -41,9 +33,9 @@ class LeanQuery:
         holding = None
         if len(self._lean_chunks(*points.shape[:2], points.device)) == 1:
             def holding(G, box_min, box_max):
-                test = _box_test(points, G, box_min, box_max)
+                test = box_test(points, G, box_min, box_max)
                 pending["test"] = (G, *test)
-                return (test[2] <= 0).any(dim=1).any(dim=0)   # (K,): parts whose box holds a point; NaN holds none
+                return parts_holding(test[2])
         return self._encoding_for(out, points, frames, holding), pending
 
     def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0, outside: bool = True,
@@ -73,7 +65,7 @@ class LeanQuery:
         if test is not None and test[0] is enc.G and b0 == 0 and test[1].shape[:2] == (B, N):
             u, q, q_max = test[1:]                                            # made by `_lean_encoding`
         else:
-            u, q, q_max = _box_test(points, G, box_min, box_max)
+            u, q, q_max = box_test(points, G, box_min, box_max)
         del test
         raw = q_max <= 0                                                      # (B, N, K) point in box k
         grad = torch.is_grad_enabled() and any(x.requires_grad for x in (points, G, box_min, box_max))

@@ -23,6 +23,7 @@ from torch.profiler import record_function
 
 from .boxes import inside_boxes, near_boxes, part_normalization
 from .collision import reduce_penetration
+from .encode_graph import EncodeGraphs
 from .encoding import Encoding, EncodingCache
 from .lean_query import DECODER_SCOPE, LeanQuery
 from .models import kind_of_network, model_kind
@@ -35,6 +36,7 @@ from .query_chunks import assemble_chunks, point_ranges
 from .self_penetration import SELFPEN_TAU, overlap_samples, reduce_selfpen, sdf_penalty
 from .validate import check_points
 from .volume_api import BodyVolume, check_output
+
 
 class Volume(EncodingCache, LeanQuery, BodyVolume):
     """Volumetric (SDF) extension of one body model; see the module docstring.
@@ -62,6 +64,9 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
             'tiles' where the network or dtype has no grouped matmul (COAP, float64, float32 on CUDA).
         precision: the decoders' arithmetic on the sparse path, 'full' (default), 'bf16' or 'tf32' (volsmpl.precision;
             `set_precision`). The dense reference path always runs in full precision.
+        cuda_graphs: encode CUDA body outputs under torch.no_grad() by replaying a captured CUDA graph
+            (volsmpl.encode_graph: one per batch shape, same values; all parts are encoded, also where a query
+            needs only some). Off by default until measured on a GPU; no effect on a CPU or with autograd on.
     """
 
     ENGINES = ("lean", "chunked")
@@ -69,7 +74,7 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
 
     def __init__(self, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
                  dense: bool = False, chunk_elems: int = 1 << 21, engine: str = "lean", pair_decoder: str = "tiles",
-                 precision: str = "full"):
+                 precision: str = "full", cuda_graphs: bool = False):
         super().__init__()
         self.net = net
         self.partition = partition
@@ -88,6 +93,8 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         self.decoder_evaluations = 0  # (point, part) decoder evaluations so far, for tests and benchmarks
         self.kind = kind_of_network(net)  # the registry's name of this model ('volsmpl', 'coap')
         self.set_precision(precision)
+        self.cuda_graphs = bool(cuda_graphs)
+        self.encode_graphs = EncodeGraphs()  # the captured encodes (used when cuda_graphs is on)
 
     def _frames(self, out):
         """Part transforms G (B, K, 4, 4) and padded part boxes (B, K, 3) x2 of a body output: no network."""
@@ -100,11 +107,21 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         for all K parts, the code is for `parts`, see Encoding). frames: (G, box_min, box_max) of `out`
         when already computed (see _frames). code_grad=False runs the encoder without autograd: the codes are
         constants and gradients reach the body only through the part frames and boxes (rigid part motion)."""
-        v, dtype = out.vertices, out.vertices.dtype  # (B, V, 3): callers ran check_output
-        p = self.partition
-        if p.faces.device != v.device or next(self.net.parameters()).dtype != dtype:
+        v, dtype, where = out.vertices, out.vertices.dtype, self.partition.faces.device  # callers ran check_output
+        if where != v.device or next(self.net.parameters()).dtype != dtype:
             raise ValueError(f"the body output is {dtype} on {v.device} but the volume is "
-                             f"{next(self.net.parameters()).dtype} on {p.faces.device}; move it with body.volume.to(device, dtype).")
+                             f"{next(self.net.parameters()).dtype} on {where}; move it with body.volume.to(device, dtype).")
+        if self.cuda_graphs and generator is None:
+            enc = self.encode_graphs.run((self.net, self.partition), lambda o: self._encode_eager(o, None), out)
+            if enc is not None:
+                return enc
+        return self._encode_eager(out, generator, parts, frames, code_grad)
+
+    def _encode_eager(self, out, generator, parts: torch.Tensor | None = None, frames=None,
+                      code_grad: bool = True) -> Encoding:
+        """`_encode` without the CUDA-graph replay."""
+        v = out.vertices
+        p = self.partition
         G, box_min, box_max = self._frames(out) if frames is None else frames
         center = scale = None
         if getattr(self.net.config, "normalize_parts", False):

@@ -804,14 +804,15 @@ def test_queries_encode_only_parts_holding_points(model):
 def test_lean_query_tests_the_boxes_once_for_encoding_and_query(monkeypatch):
     """On a new output, `query` and `collision_loss` pick the parts to encode with the box test the lean query then
     uses (one test, not two); values and gradients equal those with the test made again (the holder ignored)."""
+    import volsmpl.boxes as boxes
     import volsmpl.lean_query as LQ
     b = volsmpl.create_body()
     vol = volsmpl.attach_volume(b).eval()
     p = random_pose(1, seed=5)
     hand = torch.nonzero(vol.partition.vertex_labels == vol.partition.table.part_names.index("left_hand"))[:, 0]
     calls = []
-    real = LQ.box_centred
-    monkeypatch.setattr(LQ, "box_centred", lambda *a: calls.append(a[0].shape) or real(*a))
+    real = boxes.box_centred   # every box test (boxes.box_test) goes through it
+    monkeypatch.setattr(boxes, "box_centred", lambda *a: calls.append(a[0].shape) or real(*a))
 
     def run(reuse):
         q = {k: v.clone().requires_grad_() for k, v in p.items()}

@@ -24,7 +24,7 @@ T = "tests/"
 #: name -> (file in the repository, text, its replacement, tests that must catch it)
 MUTANTS = {
     # the planted bugs of issue 27
-    "pointnet_per_point_copy": ("core/nn/pointnet.py", "pooled = net.amax(dim=1, keepdim=True).expand_as(net)",
+    "pointnet_per_point_copy": ("core/nn/pointnet.py", "pooled = net.amax(dim=1, keepdim=True)",
                                 "pooled = net", [T + "test_references.py::test_pointnet_against_plain_reference"]),
     "boxes_padded_one_side": ("core/partition.py", "return center - half, center + half",
                               "return lo - 2 * (half - 0.5 * (hi - lo)), hi",
@@ -39,7 +39,7 @@ MUTANTS = {
     "selfpen_sign_flipped": ("core/self_penetration.py", "torch.sigmoid(-part / tau)", "torch.sigmoid(part / tau)",
                              [T + "test_references.py::test_selfpen_penalty_by_hand"]),
     # the bugs fixed for issue 27, put back
-    "cache_ignores_output_content": ("core/volume.py", "cached[0] is self and cached[1].key == key:", "cached[0] is self:",
+    "cache_ignores_output_content": ("core/encoding.py", "cached[0] is self and cached[1].key == key else None", "cached[0] is self else None",
                                      [T + "test_encoding_cache.py"]),
     "cache_weights_by_version": ("core/tensor_fingerprint.py", "return fingerprint([*module.parameters(), *module.buffers()])",
                                  "return tuple((t.data_ptr(), t._version) for t in (*module.parameters(), *module.buffers()))",
@@ -52,8 +52,8 @@ MUTANTS = {
     "pretrained_not_frozen": ("core/attach.py", "volume.requires_grad_(not pretrained if trainable is None else bool(trainable))",
                               "volume.requires_grad_(True)", [T + "test_frozen_volume.py"]),
     "train_config_unchecked": ("core/train_config.py", "        check_numbers(self)\n", "", [T + "test_limits.py"]),
-    "box_sdf_squares_overflow": ("core/nn/analytic.py", "norm = torch.hypot(torch.hypot(qs[..., 0], qs[..., 1]), qs[..., 2])",
-                                 "norm = qs.square().sum(-1).sqrt()", [T + "test_limits.py"]),
+    "box_sdf_squares_overflow": ("core/nn/analytic.py", "norm = ms[..., 0] * torch.where(pos, r2, torch.ones_like(r2)).sqrt()",
+                                 "norm = qp.square().sum(-1).sqrt()", [T + "test_limits.py"]),
     "device_unchecked": ("core/cli.py", "            check_device(args.device)\n", "", [T + "test_cuda_paths.py::test_device_cuda_without_cuda_is_one_line",
                                                                                    T + "test_cuda_paths.py::test_check_device_names"]),
     "volume_stays_behind": ("core/attach.py", 'object.__setattr__(body, "_apply", types.MethodType(_apply_with_volume, body))',
@@ -85,13 +85,14 @@ MUTANTS = {
                                              "chain_rotations(rodrigues(pose), (self._chain_order, self._chain_parent, self._chain_sizes))",
                                              "chain_rotations(rodrigues(pose), kinematic_levels(self.parents))",
                                              [T + "test_volume.py::test_posing_and_encoding_read_no_device_values"]),
-    "decoder_counts_groups_again": ("core/volume.py", "vals = self._decode_xin(enc, xin, b + b0, kc, counts_host)",
-                                    "vals = self._decode_xin(enc, xin, b + b0, kc)",
+    "decoder_counts_groups_again": ("core/lean_query.py",
+                                    "vals = self._decode_xin(enc, xin, b + b0, kc, counts_host, group_sorted=True)",
+                                    "vals = self._decode_xin(enc, xin, b + b0, kc, group_sorted=True)",
                                     [T + "test_volume.py::test_lean_query_makes_one_host_sync_per_chunk"]),
     "meter_peak_from_missing_rss": ("core/meter.py", "            elif rss_bytes() < 0:", "            elif False:",
                                     [T + "test_meter.py::test_cpu_meter_without_proc_reports_the_rise_of_ru_maxrss"]),
     # the tenth session (2026-11-26): GPU engine paths checked on the CPU
-    "query_drops_nonfinite_count": ("core/volume.py", "dense, True, (bad, given.shape[:-1].numel()))", "dense, True, None)",
+    "query_drops_nonfinite_count": ("core/volume.py", "dense, True, (bad, given.shape[:-1].numel()), pending)", "dense, True, None, pending)",
                                     [T + "test_volume.py::test_empty_and_bad_points"]),
     "fingerprint_every_step": ("core/encoding.py",
                                "if (cached is None or cached[0] is not self) and not (constant and self._last is not None):",
@@ -122,6 +123,14 @@ MUTANTS = {
     "outside_distance_to_the_farthest_box": ("core/nn/analytic.py", "r2.amin(dim=-1).sqrt()", "r2.nan_to_num(posinf=0.0).amax(dim=-1).sqrt()",
                                              [T + "test_nn_analytic.py::test_outside_distance_matches_per_box_minimum",
                                               T + "test_volume.py::test_far_points_skip_network_and_are_exact"]),
+    "replayed_encode_shares_its_outputs": ("core/encode_graph.py", "return map_tensors(torch.Tensor.clone, self.result)",
+                                           "return self.result",
+                                           [T + "test_encode_graph.py::test_replay_equals_eager_and_owns_its_outputs"]),
+    "graph_key_without_settings": ("core/encode_graph.py", "storage, _settings(modules), torch", "storage, (), torch",
+                                   [T + "test_encode_graph.py::test_settings_batch_and_autograd_decide_the_graph"]),
+    "graph_key_without_storage": ("core/encode_graph.py", "(inputs, str(out.vertices.device), storage,",
+                                  "(inputs, str(out.vertices.device), (),",
+                                  [T + "test_encode_graph.py::test_weights_edited_in_place_are_read_replaced_ones_recaptured"]),
 }
 
 

@@ -23,6 +23,7 @@ import numpy as np
 from scipy import stats
 
 from volsmpl.outputs import write_atomic
+from volsmpl.provenance import machine_info
 
 from .summary import compared_weight
 
@@ -130,7 +131,6 @@ def main(argv=None) -> int:
     except (OSError, ValueError) as e:
         print(f"error: {args.results}: {e}", file=sys.stderr)
         return 2
-    from volsmpl.provenance import machine_info
     table["source"] = {"results": str(args.results), "table_commit": (result.get("meta") or {}).get("git_commit")}
     table["meta"] = machine_info("cpu")   # the code that computed these differences (the table's: source)
     print(format_pairs(table))
