@@ -100,7 +100,7 @@ train)
     [ "$n" -gt 0 ] && step train $((end - SECONDS > 1 ? end - SECONDS : 1)) $V train --resume --out "$run" --device cuda \
         --max-steps "$n"
     latest=$(cat "$run/latest")
-    cp "$run/log.csv" "$W"/train*.log "$OUT"/   # 8 files come back at most: logs of this mode only
+    cp "$run/log.csv" "$run/profile.jsonl" "$W"/train*.log "$OUT"/   # 8 files come back at most: logs of this mode only
     tar cf "$OUT/run.tar" -C "$run" "$latest" config.json log.csv latest
     # files come back up to 16 MiB each (a VolumetricSMPL checkpoint with its average and Adam state is ~55 MB):
     # parts of 15 MiB, joined with `cat run.tar.* | tar x`
