@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The GPU checklist, run on a lent device machine (a bare image with CUDA torch and no open3d) from the repo root:
 #     tools/gpu_checks.sh session            # one call for a whole session (~9 min): cuda tests, bench, profile, CUDA-graph probe,
-#                                            # selfpen and motion's cost on CUDA (what a 15-minute lease can check)
+#                                            # selfpen, motion's cost and the training step's breakdown on CUDA
 #     tools/gpu_checks.sh checks             # cuda-marked tests and selfpen on CUDA
 #     tools/gpu_checks.sh bench              # `volsmpl bench --device cuda` (B = 1, 8; 60k points)
 #     tools/gpu_checks.sh apps               # hoi and motion CLIs on CUDA (small sets: costs and that they run)
@@ -56,6 +56,8 @@ session)  # the engine's CUDA paths first (tests), then its figures; each step b
     cp "$W/selfpen/results.json" "$OUT/selfpen_results.json" 2>/dev/null
     step motion_cost 75 $V motion --device cuda --model volsmpl,coap,mesh --scenes 1 --sequences 1 --iters 1 \
         --render 0 --published-cost --out "$W/motion"
+    step gt_profile 60 python3 tools/gt_profile.py --config checkpoints/volsmpl_b8q.json --device cuda \
+        --backends torch --steps 3   # the training step's breakdown on the device (make, ground truth, fwd/bwd)
     cat "$W"/*.log > "$OUT/session.log" ;;
 checks)
     step pytest_cuda 170 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
