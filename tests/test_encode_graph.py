@@ -26,6 +26,14 @@ def _volume(tiny_config, device, batch=2):
     return body, vol, outs
 
 
+def _captured_once(tiny_config, device):
+    """A volume whose encode of its first output has been captured once: (body, volume, that output, its graphs)."""
+    body, vol, (o1, _) = _volume(tiny_config, device)
+    with torch.no_grad():
+        vol.encode(o1, fresh=True)
+    return body, vol, o1, vol.encode_graphs
+
+
 def _tensors(enc) -> list:
     held = []
     map_tensors(held.append, enc)
@@ -56,10 +64,8 @@ def test_replay_equals_eager_and_owns_its_outputs(tiny_config, device):
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_weights_edited_in_place_are_read_replaced_ones_recaptured(tiny_config, device):
-    _, vol, (o1, _) = _volume(tiny_config, device)
-    g = vol.encode_graphs
+    _, vol, o1, g = _captured_once(tiny_config, device)
     with torch.no_grad():
-        vol.encode(o1, fresh=True)
         w = vol.net.encoder.fc_pos.weight
         w.mul_(1.5)                                  # in place: same storage, same graph, new values
         e = vol.encode(o1, fresh=True)
@@ -73,10 +79,8 @@ def test_weights_edited_in_place_are_read_replaced_ones_recaptured(tiny_config, 
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_settings_batch_and_autograd_decide_the_graph(tiny_config, device):
-    body, vol, (o1, _) = _volume(tiny_config, device)
-    g = vol.encode_graphs
+    body, vol, o1, g = _captured_once(tiny_config, device)
     with torch.no_grad():
-        vol.encode(o1, fresh=True)
         vol.net.encoder_bf16 = True                  # a setting the encode reads: a new capture
         _assert_equal(vol.encode(o1, fresh=True), vol._encode_eager(o1, None))
         assert g.captures == 2
@@ -120,9 +124,7 @@ def test_query_with_replayed_encode_equals_eager_query(tiny_config, device):
 
 
 def test_a_copied_volume_captures_anew(tiny_config):
-    _, vol, (o1, _) = _volume(tiny_config, "cpu")
-    with torch.no_grad():
-        vol.encode(o1, fresh=True)
+    _, vol, _, _ = _captured_once(tiny_config, "cpu")
     twin = copy.deepcopy(vol)
     assert vol.encode_graphs.captures == 1 and twin.encode_graphs.captures == 0
     assert twin.encode_graphs.backend == "emulate"
