@@ -16,6 +16,7 @@ from dataclasses import dataclass, replace
 import torch
 
 from .boxes import box_test, parts_holding
+from .encode_graph import map_tensors
 from .nn.volsmpl_net import PartCode
 from .tensor_fingerprint import fingerprint
 from .volume_api import check_output
@@ -54,22 +55,12 @@ class Encoding:
         an encoding made with code_grad=False holds (Volume.selfpen_loss)."""
         if self.code is None:
             return self
-        return replace(self, code=_detached(self.code), grouped=None, key=None)
-
-
-def _detached(field):
-    """A code field (tensor, tuple of tensors or None) without autograd history."""
-    if isinstance(field, torch.Tensor):
-        return field.detach()
-    if isinstance(field, tuple):
-        items = [_detached(f) for f in field]
-        return type(field)(*items) if hasattr(field, "_fields") else tuple(items)
-    return field
+        return replace(self, code=map_tensors(torch.Tensor.detach, self.code), grouped=None, key=None)
 
 
 class EncodingCache:
-    """The encoding cache of a Volume: needs the Volume's `_encode`, `_frames`, `_lean_chunks`, `num_parts`, `_last`
-    (the last constant encoding, None at first) and `training`."""
+    """The encoding cache of a Volume: needs the Volume's `_encode`, `_frames`, `_replays`, `_lean_chunks`, `num_parts`,
+    `_last` (the last constant encoding, None at first) and `training`."""
 
     def encode(self, out, generator: torch.Generator | None = None, fresh: bool = False) -> Encoding:
         """Encode a body output (B bodies); cached on the output and reused while the values of its tensors
@@ -116,13 +107,19 @@ class EncodingCache:
         for every part whose padded box holds a point, else a new one of those parts (and the cached
         ones), cached in turn. A part whose box holds no point only contributes its analytic box
         distance, so encoding it would change nothing: queries near a few parts (a hand and an object)
-        run the encoder on those parts only. frames: `_frames(out)` when the caller has them. holding: a function
-        (G, box_min, box_max) -> (K,) bool of the parts whose box holds a point, in place of `_parts_holding`
-        (the lean query's, which keeps its box test for the query)."""
+        run the encoder on those parts only; where the encode is a CUDA-graph replay (`_replays`), all parts are
+        encoded at once and no frames or box test are made here. frames: `_frames(out)` when the caller has them.
+        holding: a function (G, box_min, box_max) -> (K,) bool of the parts whose box holds a point, in place of
+        `_parts_holding` (the lean query's, which keeps its box test for the query)."""
         check_output(out)
         key = None if self.training else self.cache_key(out)
         enc = None if self.training else self._cached(out, key)
         if enc is not None and enc.parts is None:
+            return enc
+        if enc is None and self._replays(out):  # the replay makes its own frames and encodes every part
+            enc = self._encode(out, None)
+            if not self.training:
+                self._store(out, enc, key)
             return enc
         if enc is not None:
             frames = (enc.G, enc.box_min, enc.box_max)

@@ -111,11 +111,16 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         if where != v.device or next(self.net.parameters()).dtype != dtype:
             raise ValueError(f"the body output is {dtype} on {v.device} but the volume is "
                              f"{next(self.net.parameters()).dtype} on {where}; move it with body.volume.to(device, dtype).")
-        if self.cuda_graphs and generator is None:
+        if generator is None and self._replays(out):
             enc = self.encode_graphs.run((self.net, self.partition), lambda o: self._encode_eager(o, None), out)
             if enc is not None:
                 return enc
         return self._encode_eager(out, generator, parts, frames, code_grad)
+
+    def _replays(self, out) -> bool:
+        """Whether the encode of `out` (with the fixed surface samples) is a CUDA-graph replay: cuda_graphs on, a
+        CUDA output, autograd off (EncodeGraphs.supports); a key whose capture failed is then encoded eagerly."""
+        return self.cuda_graphs and self.encode_graphs.supports(out)
 
     def _encode_eager(self, out, generator, parts: torch.Tensor | None = None, frames=None,
                       code_grad: bool = True) -> Encoding:

@@ -4,6 +4,7 @@ graphs on a GPU. References: the eager encode of the same output (`Volume._encod
 from __future__ import annotations
 
 import copy
+import dataclasses
 
 import pytest
 import torch
@@ -87,11 +88,18 @@ def test_settings_batch_and_autograd_decide_the_graph(tiny_config, device):
         vol.net.encoder_bf16 = False
         vol.encode(o1, fresh=True)                   # the first graph again
         assert g.captures == 2 and g.replays == 3
+        table = vol.partition.table                  # a frozen config replaced by an equal copy: a new capture
+        vol.partition.table = dataclasses.replace(table)
+        vol.encode(o1, fresh=True)
+        assert g.captures == 3
+        vol.partition.table = table                  # the first object again: its graph
+        vol.encode(o1, fresh=True)
+        assert g.captures == 3 and g.replays == 5
         o3 = body(**{k: v.to(device) for k, v in random_pose(3, seed=4).items()})
         _assert_equal(vol.encode(o3, fresh=True), vol._encode_eager(o3, None))
-        assert g.captures == 3
+        assert g.captures == 4
     e = vol.encode(o1, fresh=True)                   # autograd on: eager, with its graph
-    assert g.replays == 4 and e.code.z.requires_grad
+    assert g.replays == 6 and e.code.z.requires_grad
 
 
 def test_capacity_keeps_the_most_recent(tiny_config):
@@ -121,6 +129,22 @@ def test_query_with_replayed_encode_equals_eager_query(tiny_config, device):
         ref = vol.query(o1b, pts)
     torch.testing.assert_close(got, ref, atol=1e-6, rtol=1e-6)
     assert torch.equal(got, again)
+
+
+def test_query_on_the_replay_path_makes_no_eager_frames(tiny_config):
+    """A query of a new output leaves the frames to the replay: one `_frames` call (the emulated replay's), not a
+    second eager one to choose parts that the replay encodes anyway."""
+    _, vol, _, g = _captured_once(tiny_config, "cpu")
+    _, _, (_, o2) = _volume(tiny_config, "cpu")
+    calls = []
+    frames = vol._frames
+    vol._frames = lambda out: calls.append(1) or frames(out)
+    with torch.no_grad():
+        pts = o2.vertices[:, :300] * 1.01
+        got = vol.query(o2, pts)
+        ref = vol.query_encoded(vol._encode_eager(o2, None), pts)
+    assert g.replays == 2 and len(calls) == 2           # one in the replay, one in the eager reference
+    torch.testing.assert_close(got, ref, atol=1e-6, rtol=1e-6)
 
 
 def test_a_copied_volume_captures_anew(tiny_config):

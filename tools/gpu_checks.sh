@@ -57,7 +57,7 @@ session)  # the engine's CUDA paths first (tests), then its figures; each step b
     step motion_cost 75 $V motion --device cuda --model volsmpl,coap,mesh --scenes 1 --sequences 1 --iters 1 \
         --render 0 --published-cost --out "$W/motion"
     step gt_profile 60 python3 tools/gt_profile.py --config checkpoints/volsmpl_b8q.json --device cuda \
-        --backends torch --steps 3   # the training step's breakdown on the device (make, ground truth, fwd/bwd)
+        --backends torch --steps 3 --trace   # the training step's breakdown on the device (make, ground truth, fwd/bwd), then the profiler's view of one batch
     cat "$W"/*.log > "$OUT/session.log" ;;
 checks)
     step pytest_cuda 170 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \

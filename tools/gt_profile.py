@@ -1,6 +1,7 @@
 """Training-step breakdown with each ground-truth backend, measured side by side in one process.
 
     python tools/gt_profile.py [--config cfg.json] [--steps 3] [--device cpu] [--threads 1] [--backends open3d torch]
+                               [--trace]     # then the torch profiler's table of one torch ground-truth batch
 
 For every step s the same batch (make_batch: LBS, query sampling) is made once per backend, so both backends label
 the same points, then one forward+backward (micro-batched as in training) and one Adam step run on it. Prints a
@@ -34,6 +35,7 @@ def main(argv=None) -> int:
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--backends", nargs="+", default=["open3d", "torch"])
     p.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="override config fields")
+    p.add_argument("--trace", action="store_true", help="profile one torch ground-truth batch (operators, host waits)")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
     if args.config:
@@ -83,8 +85,47 @@ def main(argv=None) -> int:
                       "gt_share": round(med["gt_s"] / step_s, 3)}
     print(json.dumps({"device": str(dev), "threads": args.threads, "batch_size": cfg.batch_size,
                       "encoder_bf16": cfg.encoder_bf16, "summary": summary}, indent=1))
+    if args.trace:
+        trace_ground_truth(cfg, body, volume.partition, dev)
     return 0
 
+
+def trace_ground_truth(cfg: TrainConfig, body, partition, dev: torch.device) -> None:
+    """The torch profiler's view of one training batch (make_batch with the torch ground truth) and of its ground
+    truth alone: the operators by device time (host time on the CPU), the launches, the host waits and the wall
+    times, so that a GPU's batch shows whether its time goes to device work or to the host issuing it."""
+    from torch.profiler import ProfilerActivity, profile
+
+    from volsmpl.groundtruth import batch_sdf
+    from volsmpl.train_batches import make_batch
+
+    cfg = dataclasses.replace(cfg, gt_backend="torch", num_workers=0)
+    batch = make_batch(cfg, body, partition, 10_000)
+    jobs = {"make_batch": lambda: make_batch(cfg, body, partition, 10_001),
+            "ground_truth": lambda: batch_sdf(batch["posed"]["vertices"], body.faces_tensor, batch["points"],
+                                              sign=cfg.gt_sign, nsamples=cfg.gt_rays, backend="torch",
+                                              check_closed=False)}
+    cuda = dev.type == "cuda"
+    acts = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if cuda else [])
+    for name, run in jobs.items():
+        run()
+        with profile(activities=acts) as prof:
+            t0 = time.perf_counter()
+            run()
+            if cuda:
+                torch.cuda.synchronize(dev)
+            wall = time.perf_counter() - t0
+        ev = prof.key_averages()
+        print(f"--- {name}")
+        print(ev.table(sort_by="self_cuda_time_total" if cuda else "self_cpu_time_total", row_limit=20,
+                       max_name_column_width=48))
+        waits = {e.key: e.count for e in ev
+                 if any(w in e.key for w in ("Synchronize", "item", "nonzero", "Memcpy", "_local_scalar"))}
+        busy = sum(getattr(e, "self_device_time_total", 0) or 0 for e in ev) / 1e6 if cuda else None
+        print(json.dumps({"trace": name, "points": int(batch["points"][..., 0].numel()), "wall_s": round(wall, 4),
+                          "launches": sum(e.count for e in ev if "LaunchKernel" in e.key),
+                          "aten_calls": sum(e.count for e in ev if e.key.startswith("aten::")),
+                          "device_busy_s": None if busy is None else round(busy, 4), "host_waits": waits}))
 
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -131,6 +131,11 @@ MUTANTS = {
     "graph_key_without_storage": ("core/encode_graph.py", "(inputs, str(out.vertices.device), storage,",
                                   "(inputs, str(out.vertices.device), (),",
                                   [T + "test_encode_graph.py::test_weights_edited_in_place_are_read_replaced_ones_recaptured"]),
+    "replay_path_makes_eager_frames": ("core/encoding.py", "if enc is None and self._replays(out):", "if False:",
+                                       [T + "test_encode_graph.py::test_query_on_the_replay_path_makes_no_eager_frames"]),
+    "frozen_configs_left_out_of_the_graph_key": ("core/encode_graph.py", "_Same(value) if kind.__dataclass_params__.frozen else repr(value)",
+                                                 "None if kind.__dataclass_params__.frozen else repr(value)",
+                                                 [T + "test_encode_graph.py::test_settings_batch_and_autograd_decide_the_graph"]),
 }
 
 
