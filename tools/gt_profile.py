@@ -12,6 +12,7 @@ CPU both see the same load. The config is a TrainConfig JSON (default: the shipp
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import json
 import statistics
@@ -100,6 +101,9 @@ def trace_ground_truth(cfg: TrainConfig, body, partition, dev: torch.device) -> 
     from volsmpl.train_batches import make_batch
 
     cfg = dataclasses.replace(cfg, gt_backend="torch", num_workers=0)
+    if body.v_template.device != dev:   # as batch_stream: a copy of the body on the device, its volume shared
+        vol = getattr(body, "volume", None)
+        body = copy.deepcopy(body, memo={} if vol is None else {id(vol): vol}).to(dev)
     batch = make_batch(cfg, body, partition, 10_000)
     jobs = {"make_batch": lambda: make_batch(cfg, body, partition, 10_001),
             "ground_truth": lambda: batch_sdf(batch["posed"]["vertices"], body.faces_tensor, batch["points"],
