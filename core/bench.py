@@ -18,8 +18,8 @@ their accuracy columns are measured in that precision), 'volsmpl-tiles' / 'volsm
 with that pair decoder, `PAIR_DECODERS`, `Volume.pair_decoder`, whichever the default is), 'volsmpl-onechunk'
 (the lean path with the whole batch in one chunk and untiled decoders, `ONE_CHUNK`: its operator calls do not
 depend on B; the default 'volsmpl' keeps cache-sized chunks on the CPU, one body per chunk at 60k points), and
-'volsmpl-graphs' (the encode replayed from a CUDA graph, `CUDA_GRAPHS`, `Volume.cuda_graphs`; on a CPU the same
-as 'volsmpl'). A model whose `attach_volume(body, model=...)` is not available is skipped with a note.
+'volsmpl-eager' (the no-grad encode run op by op, `EAGER_ENCODE`: `Volume.cuda_graphs` off; the default 'volsmpl'
+replays it from a CUDA graph on a GPU; on a CPU the two are the same). A model whose `attach_volume(body, model=...)` is not available is skipped with a note.
 
 A run measures:
   - the machine's fp32 matmul rate (`bench_jobs.matmul_rate`);
@@ -54,7 +54,7 @@ from .bench_jobs import bodybody_inputs, make_frames, matmul_rate, run_job
 from .bench_report import PAPER, caveats, compute_ratios, format_report, to_markdown
 from .provenance import machine_info
 
-__all__ = ["MODELS", "ENGINES", "PRECISIONS", "PAIR_DECODERS", "ONE_CHUNK", "CUDA_GRAPHS", "BenchConfig", "model_available",
+__all__ = ["MODELS", "ENGINES", "PRECISIONS", "PAIR_DECODERS", "ONE_CHUNK", "EAGER_ENCODE", "BenchConfig", "model_available",
            "checkpoint_for", "bench_model",
            "bench_bodybody", "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
            "add_parser", "config_from_args", "run", "PAPER", "compute_ratios", "format_report", "to_markdown"]
@@ -71,7 +71,7 @@ MODELS: Dict[str, Tuple[str, bool]] = {
     "volsmpl-onechunk": ("volsmpl", False),  # the lean path in one chunk per query, decoders untiled
     "volsmpl-tiles": ("volsmpl", False),     # the sparse engine with the tiled pair decoder (Volume.pair_decoder)
     "volsmpl-grouped": ("volsmpl", False),   # the sparse engine with one grouped matmul per decoder layer
-    "volsmpl-graphs": ("volsmpl", False),    # the encode replayed from a captured CUDA graph (Volume.cuda_graphs)
+    "volsmpl-eager": ("volsmpl", False),     # the no-grad encode op by op (Volume.cuda_graphs off)
 }
 
 #: benchmark model name -> Volume.engine of its sparse path (default 'lean')
@@ -82,8 +82,8 @@ PRECISIONS: Dict[str, str] = {"volsmpl-bf16": "bf16", "volsmpl-tf32": "tf32"}
 PAIR_DECODERS: Dict[str, str] = {"volsmpl-tiles": "tiles", "volsmpl-grouped": "grouped"}
 #: benchmark models whose query runs as one chunk (no memory or cache chunks, no decoder tiles)
 ONE_CHUNK: Tuple[str, ...] = ("volsmpl-onechunk",)
-#: benchmark models whose no-grad encode replays a CUDA graph on a GPU (Volume.cuda_graphs)
-CUDA_GRAPHS: Tuple[str, ...] = ("volsmpl-graphs",)
+#: benchmark models whose no-grad encode runs op by op on a GPU (Volume.cuda_graphs off; the others replay a graph)
+EAGER_ENCODE: Tuple[str, ...] = ("volsmpl-eager",)
 
 
 @dataclass
@@ -214,7 +214,7 @@ def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optio
     job = {"spec": {"model": model, "dense": dense, "checkpoint": checkpoint, "init_seed": cfg.init_seed,
                     "engine": ENGINES.get(name, "lean"), "precision": PRECISIONS.get(name, "full"),
                     "one_chunk": name in ONE_CHUNK, "pair_decoder": PAIR_DECODERS.get(name),
-                    "cuda_graphs": name in CUDA_GRAPHS},
+                    "cuda_graphs": name not in EAGER_ENCODE},
            "device": cfg.device, "threads": cfg.threads or torch.get_num_threads(), "warmup": cfg.warmup,
            "repeats": cfg.repeats, "budget_s": cfg.budget_s}
     r = run_job("volsmpl.bench_jobs:volume_job", job, inputs, cfg.timeout_s)

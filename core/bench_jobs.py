@@ -208,7 +208,7 @@ def build_volume(body, spec: dict):
     vol.set_precision(spec.get("precision", "full"))
     if spec.get("pair_decoder"):
         vol.pair_decoder = spec["pair_decoder"]
-    vol.cuda_graphs = bool(spec.get("cuda_graphs", False))
+    vol.cuda_graphs = bool(spec.get("cuda_graphs", True))
     if spec["dense"] or spec.get("one_chunk"):
         # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
         # no cache tiling; 'one_chunk' does the same on the sparse path

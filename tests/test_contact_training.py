@@ -51,6 +51,19 @@ def test_contact_vertices_equal_brute_force(body):
         contact_vertices(v, body.v_template, radius=0.2, rest_gap=0.1)
 
 
+def test_contact_methods_agree(body):
+    """The torch method (every pair's distance; what a GPU batch uses) gives the k-d tree's mask, for a shared rest
+    shape and for one rest shape per body."""
+    v = _posed(body, torch.cat([named_pose("sitting"), named_pose("t_pose")]))
+    ref = contact_vertices(v, body.v_template, method="kdtree")
+    got = contact_vertices(v, body.v_template, method="torch")
+    assert ref[0].sum() > 50 and torch.equal(got, ref)
+    rest = torch.stack([body.v_template, body.v_template * 1.5])    # body 1 at rest 1.5x larger: fewer near pairs
+    assert torch.equal(contact_vertices(v, rest, method="torch"), contact_vertices(v, rest, method="kdtree"))
+    with pytest.raises(ValueError, match="method"):
+        contact_vertices(v, body.v_template, method="grid")
+
+
 def test_contact_poses_touch_more_than_realistic_ones(body):
     e = sample_contact_euler(16, seed=3)
     pose = euler_to_body_pose(e)
