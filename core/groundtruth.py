@@ -425,9 +425,10 @@ def batch_sdf(vertices, faces, points, sign: str = "ray_winding", nsamples: int 
 
     Shape: vertices (B, V, 3), faces (F, 3), points (B, N, 3) -> (B, N), torch on the points' device and dtype
     for torch points (numpy otherwise).
-    backend: 'open3d' (`batch_mesh_sdf` on the CPU), 'torch' (`MeshQuery` on the vertices' device, at most `chunk`
-    point-triangle pairs at once; None: `mesh_query.DEFAULT_CHUNK` (2^20, <= 0.6 GB) on the CPU, 8x that on a GPU,
-    where fewer, larger blocks keep it busy) or 'auto' (`resolve_gt_backend`).
+    backend: 'open3d' (`batch_mesh_sdf` on the CPU), 'torch' (one batched `MeshQuery` on the vertices' device, at most
+    `chunk` point-triangle pairs at once; None: `mesh_query.DEFAULT_CHUNK` (2^20, <= 0.6 GB) on the CPU, 8x that on a
+    GPU with 4x as many (point, cluster) bounds a block, where fewer, larger blocks keep it busy) or 'auto'
+    (`resolve_gt_backend`).
     The torch backend counts crossings of one ray with exact tie-breaking, so every sign mode needs no vote:
     'raycast' is the parity of the crossings, the other modes the winding number (> 0 inside: self-overlaps
     inside); it needs a closed, consistently oriented mesh (checked when check_closed).
@@ -447,15 +448,15 @@ def batch_sdf(vertices, faces, points, sign: str = "ray_winding", nsamples: int 
     if check_closed and len(vt):
         _require_closed(_to_numpy(ft, "faces", np.int64), sign, _to_numpy(vt[0], "vertices", np.float64))
     out = torch.zeros(pt.shape[:2], dtype=torch.float64, device=dev)
-    for i in range(len(vt)):
-        if pt.shape[1] == 0:
-            break
-        mq = MeshQuery(vt[i], ft, chunk=(DEFAULT_CHUNK * (1 if dev.type == "cpu" else 8)) if chunk is None else chunk)
-        p = pt[i].to(dev)
+    if pt.shape[1] and len(vt):   # one query object and one pass for the whole batch (the meshes share their faces)
+        cpu = dev.type == "cpu"
+        chunk = (DEFAULT_CHUNK * (1 if cpu else 8)) if chunk is None else chunk
+        mq = MeshQuery(vt, ft, chunk=chunk, bound_chunk=chunk * (1 if cpu else 4))
+        p = pt.to(dev)
         signed, total = mq.crossings(p)
         inside = (total % 2 == 1) if sign == "raycast" else signed > 0
         d = mq.distances(p)
-        out[i] = torch.where(inside, -d, d)
+        out = torch.where(inside, -d, d)
     if not torch.is_tensor(points):
         return _wrap_like(out.cpu().numpy(), points)
     return out.to(points.device, points.dtype if points.is_floating_point() else torch.get_default_dtype())

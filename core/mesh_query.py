@@ -3,6 +3,7 @@
     mq = MeshQuery(vertices, faces)          # faces grouped into spatial clusters with bounding spheres / boxes
     idx = mq.nearest_faces(points)           # (N,) the exact nearest triangle of every point
     w = mq.winding_numbers(points)           # (N,) int64 exact winding numbers of a closed, oriented mesh
+    mq = MeshQuery(vertices_b, faces)        # a batch (B, V, 3) sharing faces: points (B, N, 3) -> (B, N), one pass
     t = first_hits(v[f], origins, dirs)      # (N,) distance to the first triangle along each ray (inf: none)
 
 This is the torch ground truth of training (`volsmpl.groundtruth.batch_sdf(backend='torch')`) and the torch
@@ -23,8 +24,11 @@ Culling (exact, conservative): faces are sorted along a Morton curve of their ce
     relative to the point, (a - p) x (b - p): a ray that passes within rounding of a vertex sees the same
     offset from it in every edge there, so the faces around the vertex agree on which one it crosses.
 
-Memory: work is done in blocks of at most `chunk` point-triangle (or point-cluster) pairs, at most ~0.6 kB each
-in float64 (measured on the CPU: 0.15 kB, a 154 MB peak at the default 2^20), whatever the number of points. Cost: O(N * F / cluster_size) for
+Memory: work is done in blocks of at most `chunk` point-triangle pairs, at most ~0.6 kB each in float64 (measured
+on the CPU: 0.15 kB, a 154 MB peak at the default 2^20), and of at most `bound_chunk` (point, cluster) bounds (default
+`chunk`), whatever the number of points. A batch of meshes is one set of clusters (mesh b's after mesh b - 1's) and
+its blocks hold points of every mesh, each tested against its own mesh's clusters only: the same results as one
+MeshQuery per mesh, bit for bit, with the operator calls of one mesh (a GPU's ground truth was bound by them). Cost: O(N * F / cluster_size) for
 the culling plus the surviving pairs (tens of clusters per point near a body surface).
 Everything runs in float64 on the vertices' device; nothing here is differentiable.
 
@@ -133,24 +137,25 @@ def first_hits(triangles: torch.Tensor, origins: torch.Tensor, directions: torch
 
 
 def _kd_clusters(x: torch.Tensor, size: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """Indices (C, m) of points x (n, 3) grouped into C = 2^L compact clusters of m <= size (median splits along
-    the longest axis, as a k-d tree's leaves), and a mask (C, m), False on the evenly spread indices repeated to
-    fill the clusters when n is not C * m (each index is True exactly once)."""
-    n = len(x)
+    """Indices (B, C, m) of the points x (B, n, 3) of each of B sets grouped into C = 2^L compact clusters of
+    m <= size (median splits along the longest axis, as a k-d tree's leaves), and a mask (B, C, m), False on the
+    evenly spread indices repeated to fill the clusters when n is not C * m (each index is True exactly once)."""
+    B, n = x.shape[:2]
     levels = max(0, math.ceil(math.log2(max(1.0, n / size))))
     C = 1 << levels
     m = -(-n // C)
     base = torch.arange(n, device=x.device)
     if C * m > n:
         base = torch.cat([base, torch.linspace(0, n - 1, C * m - n, device=x.device).round().long()])
-    slot = torch.arange(C * m, device=x.device)  # slots < n hold the originals
+    slot = torch.arange(C * m, device=x.device).expand(B, -1)  # slots < n hold the originals
+    sets = torch.arange(B, device=x.device)[:, None, None]
     for level in range(levels):
-        g = slot.reshape(1 << level, -1)  # groups of this level, each split in two halves
-        pts = x[base[g]]  # (G, s, 3)
-        axis = (pts.amax(1) - pts.amin(1)).argmax(dim=1)  # (G,) longest extent
-        key = torch.gather(pts, 2, axis[:, None, None].expand(-1, pts.shape[1], 1))[..., 0]
-        slot = torch.gather(g, 1, key.argsort(dim=1, stable=True)).reshape(-1)
-    return base[slot].reshape(C, m), (slot < n).reshape(C, m)
+        g = slot.reshape(B, 1 << level, -1)  # groups of this level, each split in two halves
+        pts = x[sets, base[g]]  # (B, G, s, 3)
+        axis = (pts.amax(2) - pts.amin(2)).argmax(dim=2)  # (B, G) longest extent
+        key = torch.gather(pts, 3, axis[:, :, None, None].expand(-1, -1, pts.shape[2], 1))[..., 0]
+        slot = torch.gather(g, 2, key.argsort(dim=2, stable=True)).reshape(B, -1)
+    return base[slot].reshape(B, C, m), (slot < n).reshape(B, C, m)
 
 
 def _ray_frame(dtype, device) -> torch.Tensor:
@@ -171,59 +176,87 @@ def _sos_sign(e: torch.Tensor, ax, ay, bx, by) -> torch.Tensor:
 class MeshQuery:
     """Spatial clusters of a triangle mesh's faces for exact nearest-face and ray-crossing queries (module docstring).
 
-    Shape: vertices (V, 3) float, faces (F, 3) int on the same device (faces are moved there); queries take points
-    (N, 3) and return (N,) on the vertices' device.
-    Args: cluster_size: faces per cluster (culling granularity); chunk: bound on the pairs evaluated at once.
+    One mesh, or a batch of B meshes sharing their faces (posed bodies: one query object and one pass over the
+    batch, so that a GPU issues the work of B meshes at once).
+    Shape: vertices (V, 3) or (B, V, 3) float, faces (F, 3) int on the same device (faces are moved there); queries
+    take points (N, 3), or (B, N, 3) for a batch (body b's points against mesh b), and return (N,) or (B, N) on the
+    vertices' device.
+    Args: cluster_size: faces per cluster (culling granularity); chunk: bound on the point-triangle pairs evaluated
+    at once; bound_chunk: bound on the (point, cluster) entries of one block's distance bounds (~40 B each; default
+    chunk: a block then holds chunk / clusters points of every mesh).
     """
 
-    def __init__(self, vertices: torch.Tensor, faces: torch.Tensor, cluster_size: int = 32, chunk: int = DEFAULT_CHUNK):
-        if vertices.ndim != 2 or vertices.shape[-1] != 3:
-            raise ValueError(f"vertices must be (V, 3), got {tuple(vertices.shape)}; pass one mesh at a time.")
+    def __init__(self, vertices: torch.Tensor, faces: torch.Tensor, cluster_size: int = 32, chunk: int = DEFAULT_CHUNK,
+                 bound_chunk: int | None = None):
+        if vertices.ndim not in (2, 3) or vertices.shape[-1] != 3:
+            raise ValueError(f"vertices must be (V, 3) or a batch (B, V, 3), got {tuple(vertices.shape)}.")
         faces = torch.as_tensor(faces, device=vertices.device).long()
         if faces.ndim != 2 or faces.shape[-1] != 3 or len(faces) == 0:
             raise ValueError(f"faces must be (F, 3) with F > 0, got {tuple(faces.shape)}.")
-        if int(faces.min()) < 0 or int(faces.max()) >= len(vertices):
-            raise ValueError(f"faces index vertices outside [0, {len(vertices)}); pass the faces of these vertices.")
-        if cluster_size < 1 or chunk < cluster_size:
-            raise ValueError(f"cluster_size={cluster_size} must be >= 1 and chunk={chunk} >= cluster_size.")
+        V = vertices.shape[-2]
+        if int(faces.min()) < 0 or int(faces.max()) >= V:
+            raise ValueError(f"faces index vertices outside [0, {V}); pass the faces of these vertices.")
+        bound_chunk = chunk if bound_chunk is None else bound_chunk
+        if cluster_size < 1 or chunk < cluster_size or bound_chunk < 1:
+            raise ValueError(f"cluster_size={cluster_size} must be >= 1, chunk={chunk} >= cluster_size and "
+                             f"bound_chunk={bound_chunk} >= 1.")
+        self.batched = vertices.ndim == 3
         v = vertices.detach().to(torch.float64)
+        v = v if self.batched else v[None]  # (B, V, 3)
         if not torch.isfinite(v).all():
             raise ValueError("vertices contain NaN/inf; the posed mesh is broken (check the pose/shape parameters).")
-        self.device, self.chunk, self.M = v.device, int(chunk), int(cluster_size)
-        self.num_faces = len(faces)
-        ids, self.valid = _kd_clusters(v[faces].mean(1), self.M)  # (C, m), m <= cluster_size
-        self.face_ids, self.M = ids, ids.shape[1]
-        fc = faces[ids]  # (C, M, 3)
-        tri = v[fc]  # (C, M, 3, 3)
+        self.device, self.chunk, self.bound_chunk, self.M = v.device, int(chunk), int(bound_chunk), int(cluster_size)
+        self.B, self.num_faces = len(v), len(faces)
+        B, F = self.B, self.num_faces
+        ids, valid = _kd_clusters(v[:, faces].mean(2), self.M)  # (B, C, m), m <= cluster_size
+        self.C, self.M = ids.shape[1], ids.shape[2]
+        fc = faces[ids]  # (B, C, M, 3) vertex ids of each mesh
+        tri = v[torch.arange(B, device=v.device)[:, None, None, None], fc].flatten(0, 1)  # (B*C, M, 3, 3)
+        fc = fc.flatten(0, 1)
+        # clusters of all meshes in one axis: mesh b's are b*C ... b*C + C - 1, its faces b*F ... b*F + F - 1
+        self.face_ids = (ids + F * torch.arange(B, device=v.device)[:, None, None]).flatten(0, 1)  # (B*C, M)
+        self.valid = valid.flatten(0, 1)
         self.tri = tri
         lo, hi = tri.amin(dim=(1, 2)), tri.amax(dim=(1, 2))
-        self.center = 0.5 * (lo + hi)  # (C, 3)
-        self.radius = (tri - self.center[:, None, None]).norm(dim=-1).amax(dim=(1, 2))  # (C,)
-        self.tri_flat = v[faces]  # (F, 3, 3)
-        self.face_center = tri.mean(2)  # (C, M, 3) per-face bounding spheres (centroid, farthest corner)
-        self.face_radius = (tri - self.face_center[..., None, :]).norm(dim=-1).amax(dim=-1)  # (C, M)
+        self.center = 0.5 * (lo + hi)  # (B*C, 3)
+        self.radius = (tri - self.center[:, None, None]).norm(dim=-1).amax(dim=(1, 2))  # (B*C,)
+        self.tri_flat = v[:, faces].flatten(0, 1)  # (B*F, 3, 3)
+        self.face_center = tri.mean(2)  # (B*C, M, 3) per-face bounding spheres (centroid, farthest corner)
+        self.face_radius = (tri - self.face_center[..., None, :]).norm(dim=-1).amax(dim=-1)  # (B*C, M)
         # ray frame: rotated vertices, per-cluster 2-D boxes and top, canonical edges (lower vertex index first)
         self.R = _ray_frame(torch.float64, v.device)
-        rtri = v[fc] @ self.R.T  # (C, M, 3, 3)
+        rtri = tri @ self.R.T  # (B*C, M, 3, 3)
         self.rtri = rtri
-        self.rlo, self.rhi = rtri.amin(dim=(1, 2)), rtri.amax(dim=(1, 2))  # (C, 3)
-        i0, i1 = fc, fc.roll(-1, dims=-1)  # edges (0,1), (1,2), (2,0): (C, M, 3)
+        self.rlo, self.rhi = rtri.amin(dim=(1, 2)), rtri.amax(dim=(1, 2))  # (B*C, 3)
+        i0, i1 = fc, fc.roll(-1, dims=-1)  # edges (0,1), (1,2), (2,0): (B*C, M, 3)
         flip = i0 > i1
-        self.edge_a = torch.where(flip[..., None], rtri.roll(-1, dims=-2), rtri)[..., :2]  # (C, M, 3, 2)
+        self.edge_a = torch.where(flip[..., None], rtri.roll(-1, dims=-2), rtri)[..., :2]  # (B*C, M, 3, 2)
         self.edge_b = torch.where(flip[..., None], rtri, rtri.roll(-1, dims=-2))[..., :2]
-        self.edge_s = torch.where(flip, -1.0, 1.0).to(torch.float64)  # (C, M, 3)
+        self.edge_s = torch.where(flip, -1.0, 1.0).to(torch.float64)  # (B*C, M, 3)
 
     def _points(self, points: torch.Tensor) -> torch.Tensor:
-        if points.ndim != 2 or points.shape[-1] != 3:
-            raise ValueError(f"points must be (N, 3), got {tuple(points.shape)}.")
+        """points (N, 3) of one mesh, or (B, N, 3) of a batch -> (B, N, 3) float64 on the device."""
+        want = f"(B={self.B}, N, 3) (one set per mesh)" if self.batched else "(N, 3)"
+        if points.ndim != (3 if self.batched else 2) or points.shape[-1] != 3 or (self.batched and len(points) != self.B):
+            raise ValueError(f"points must be {want}, got {tuple(points.shape)}.")
         p = points.detach().to(self.device, torch.float64)
         if not torch.isfinite(p).all():
             raise ValueError("points contain NaN/inf; remove or replace them before querying the mesh.")
-        return p
+        return p if self.batched else p[None]
+
+    def _out(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, N) result -> (N,) for one mesh."""
+        return x if self.batched else x[0]
+
+    def _rows(self) -> int:
+        """Points of every mesh in one block: its (point, cluster) bounds stay within bound_chunk entries."""
+        return max(1, self.bound_chunk // (self.B * max(self.C, self.M)))
 
     def _pair_blocks(self, mask: torch.Tensor):
-        """(point, cluster) pairs of a boolean (n, C) mask, in blocks of at most chunk / M pairs."""
-        pi, ci = mask.nonzero(as_tuple=True)
+        """(point, cluster) pairs of a boolean (B, n, C) mask, in blocks of at most chunk / M pairs, as indices into
+        the block's points of all meshes (b * n + i) and into the clusters of all meshes (b * C + c)."""
+        b, i, c = mask.nonzero(as_tuple=True)
+        pi, ci = b * mask.shape[1] + i, b * self.C + c
         step = max(1, self.chunk // self.M)
         for s in range(0, len(pi), step):
             yield pi[s:s + step], ci[s:s + step]
@@ -236,47 +269,56 @@ class MeshQuery:
         d2 = _dot(q - pp, q - pp)
         return torch.where(self.valid[ci], d2, torch.full_like(d2, math.inf))
 
-    @torch.no_grad()
-    def nearest_faces(self, points: torch.Tensor) -> torch.Tensor:
-        """Index of the exact nearest triangle of every point (ties: the lowest face index).
-
-        Shape: points (N, 3) -> (N,) int64 on the vertices' device.
-        """
-        p_all = self._points(points)
-        out = torch.empty(len(p_all), dtype=torch.long, device=self.device)
-        C = len(self.center)
-        step = max(1, self.chunk // max(C, self.M))
-        for s in range(0, len(p_all), step):
-            p = p_all[s:s + step]
-            n = len(p)
-            gap = torch.cdist(p, self.center) - self.radius  # (n, C): lower bound of the distance to each cluster
-            first = gap.argmin(dim=1)
-            ub = self._face_sq_dists(p, first).amin(dim=1).sqrt()  # upper bound: exact distance to one cluster
+    def _nearest(self, p_all: torch.Tensor) -> torch.Tensor:
+        """Index (B, N) into tri_flat (faces of all meshes) of the exact nearest triangle of points (B, N, 3)."""
+        B, N = p_all.shape[:2]
+        out = torch.empty(B, N, dtype=torch.long, device=self.device)
+        center, radius = self.center.view(B, self.C, 3), self.radius.view(B, 1, self.C)
+        first_of = self.C * torch.arange(B, device=self.device)[:, None]  # (B, 1) first cluster of each mesh
+        none = B * self.num_faces  # larger than every face index
+        step = self._rows()
+        for s in range(0, N, step):
+            p = p_all[:, s:s + step]
+            n = p.shape[1]
+            gap = torch.cdist(p, center) - radius  # (B, n, C): lower bound of the distance to each cluster
+            first = (gap.argmin(dim=2) + first_of).reshape(-1)
+            pf = p.reshape(-1, 3)  # (B*n, 3): the block's points of all meshes
+            ub = self._face_sq_dists(pf, first).amin(dim=1).sqrt()  # upper bound: exact distance to one cluster
             lim = ub + 1e-6 + 1e-9 * ub  # rounding of the bounds (cdist by matrix products) must never drop the nearest
-            best = torch.full((n,), math.inf, dtype=torch.float64, device=self.device)
+            best = torch.full((B * n,), math.inf, dtype=torch.float64, device=self.device)
             cand_d, cand_f, cand_p = [], [], []
-            for pi, ci in self._pair_blocks(gap <= lim[:, None]):
-                fgap = (p[pi, None] - self.face_center[ci]).norm(dim=-1) - self.face_radius[ci]  # (P, M) per face
+            for pi, ci in self._pair_blocks(gap <= lim.view(B, n, 1)):
+                fgap = (pf[pi, None] - self.face_center[ci]).norm(dim=-1) - self.face_radius[ci]  # (P, M) per face
                 qi, mi = ((fgap <= lim[pi, None]) & self.valid[ci]).nonzero(as_tuple=True)
                 face, pt = self.face_ids[ci[qi], mi], pi[qi]
-                tri, x = self.tri_flat[face], p[pt]
+                tri, x = self.tri_flat[face], pf[pt]
                 q = closest_points_on_triangles(x, tri[:, 0], tri[:, 1], tri[:, 2])
                 d2 = _dot(q - x, q - x)
                 best.scatter_reduce_(0, pt, d2, reduce="amin")
                 cand_d.append(d2), cand_f.append(face), cand_p.append(pt)
             d, f, pi = torch.cat(cand_d), torch.cat(cand_f), torch.cat(cand_p)
-            f = torch.where(d <= best[pi], f, torch.full_like(f, self.num_faces))
-            res = torch.full((n,), self.num_faces, dtype=torch.long, device=self.device)
-            out[s:s + n] = res.scatter_reduce_(0, pi, f, reduce="amin")
+            f = torch.where(d <= best[pi], f, torch.full_like(f, none))
+            res = torch.full((B * n,), none, dtype=torch.long, device=self.device)
+            out[:, s:s + n] = res.scatter_reduce_(0, pi, f, reduce="amin").view(B, n)
         return out
 
     @torch.no_grad()
+    def nearest_faces(self, points: torch.Tensor) -> torch.Tensor:
+        """Index of the exact nearest triangle of every point (ties: the lowest face index).
+
+        Shape: points (N, 3) -> (N,), or (B, N, 3) -> (B, N) for a batch, int64 on the vertices' device.
+        """
+        idx = self._nearest(self._points(points))
+        return self._out(idx - self.num_faces * torch.arange(self.B, device=self.device)[:, None])
+
+    @torch.no_grad()
     def distances(self, points: torch.Tensor) -> torch.Tensor:
-        """Exact unsigned distances (N,) float64 of points (N, 3) to the mesh (to their nearest triangle)."""
+        """Exact unsigned distances (N,) or (B, N) float64 of points (N, 3) or (B, N, 3) to the mesh (its nearest
+        triangle)."""
         p = self._points(points)
-        tri = self.tri_flat[self.nearest_faces(p)]
-        q = closest_points_on_triangles(p, tri[:, 0], tri[:, 1], tri[:, 2])
-        return _dot(q - p, q - p).sqrt()
+        tri = self.tri_flat[self._nearest(p)]  # (B, N, 3, 3)
+        q = closest_points_on_triangles(p, tri[..., 0, :], tri[..., 1, :], tri[..., 2, :])
+        return self._out(_dot(q - p, q - p).sqrt())
 
     @torch.no_grad()
     def crossings(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -284,23 +326,29 @@ class MeshQuery:
 
         The signed count (+1 leaving through a face, -1 entering) is the exact winding number of a closed,
         consistently oriented mesh; the unsigned count's parity is the ray-parity inside test.
-        Shape: points (N, 3) -> signed (N,) int64, unsigned (N,) int64 on the vertices' device.
+        Shape: points (N, 3) -> signed (N,) int64, unsigned (N,) int64 (a batch: (B, N, 3) -> (B, N) each), on
+        the vertices' device.
         """
         p_all = self._points(points) @ self.R.T
-        signed = torch.zeros(len(p_all), dtype=torch.long, device=self.device)
+        B, N = p_all.shape[:2]
+        signed = torch.zeros(B, N, dtype=torch.long, device=self.device)
         total = torch.zeros_like(signed)
-        C = len(self.center)
-        step = max(1, self.chunk // max(C, self.M))
-        for s in range(0, len(p_all), step):
-            p = p_all[s:s + step]
-            x, y, z = p[:, 0, None], p[:, 1, None], p[:, 2, None]
-            hit = (x >= self.rlo[:, 0]) & (x <= self.rhi[:, 0]) & (y >= self.rlo[:, 1]) & (y <= self.rhi[:, 1]) \
-                & (z <= self.rhi[:, 2])  # (n, C): the ray can meet the cluster's box
+        rlo, rhi = self.rlo.view(B, 1, self.C, 3), self.rhi.view(B, 1, self.C, 3)
+        step = self._rows()
+        for s in range(0, N, step):
+            p = p_all[:, s:s + step]
+            n = p.shape[1]
+            x, y, z = p[..., 0, None], p[..., 1, None], p[..., 2, None]
+            hit = (x >= rlo[..., 0]) & (x <= rhi[..., 0]) & (y >= rlo[..., 1]) & (y <= rhi[..., 1]) \
+                & (z <= rhi[..., 2])  # (B, n, C): the ray can meet the cluster's box
+            pf = p.reshape(-1, 3)
+            sb, tb = signed.new_zeros(B * n), total.new_zeros(B * n)
             for pi, ci in self._pair_blocks(hit):
-                w = self._cluster_crossings(p[pi], ci)  # (P, M) in {-1, 0, 1}
-                signed[s:s + len(p)].index_add_(0, pi, w.sum(1))
-                total[s:s + len(p)].index_add_(0, pi, w.abs().sum(1))
-        return signed, total
+                w = self._cluster_crossings(pf[pi], ci)  # (P, M) in {-1, 0, 1}
+                sb.index_add_(0, pi, w.sum(1))
+                tb.index_add_(0, pi, w.abs().sum(1))
+            signed[:, s:s + n], total[:, s:s + n] = sb.view(B, n), tb.view(B, n)
+        return self._out(signed), self._out(total)
 
     def _cluster_crossings(self, p: torch.Tensor, ci: torch.Tensor) -> torch.Tensor:
         """Crossings (P, M) in {-1, 0, +1} of the +z rays from ray-frame points p (P, 3) with the faces of clusters ci."""

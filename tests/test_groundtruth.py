@@ -531,6 +531,32 @@ def test_mesh_query_against_brute_force_and_winding(shape, cube, sphere, rng):
     assert np.array_equal(mq.winding_numbers(torch.as_tensor(p)).numpy()[keep], w_ref[keep])
 
 
+def test_mesh_query_batch_against_brute_force(sphere, rng):
+    """A batch of meshes sharing faces (the sphere moved and stretched per mesh), each with its own points: exact
+    distances by brute force over every triangle of that mesh, nearest faces at those distances, integer winding
+    numbers (float64 solid angles); in blocks smaller than a mesh's clusters and points, so that blocks mix meshes."""
+    from volsmpl.mesh_query import MeshQuery
+    v0, f = sphere
+    scale = np.array([[1.0, 1.0, 1.0], [1.4, 0.7, 1.0], [0.6, 0.6, 1.3]])
+    verts = v0[None] * scale[:, None] + np.array([[0.0, 0, 0], [0.05, -0.02, 0.1], [-0.1, 0, 0]])[:, None]
+    pts = rng.uniform(-1.0, 1.0, (3, 400, 3))
+    mq = MeshQuery(torch.as_tensor(verts), torch.as_tensor(f), cluster_size=8, chunk=64, bound_chunk=300)
+    dist, near = mq.distances(torch.as_tensor(pts)).numpy(), mq.nearest_faces(torch.as_tensor(pts)).numpy()
+    wind = mq.winding_numbers(torch.as_tensor(pts)).numpy()
+    assert dist.shape == near.shape == wind.shape == (3, 400)
+    for b in range(3):
+        ref = brute_distance(pts[b], verts[b], f)
+        assert np.abs(dist[b] - ref).max() < 1e-9
+        tri = verts[b][f[near[b]]]                        # each point's nearest face: at the exact distance
+        cp = closest_point_on_triangles(pts[b], tri[:, 0], tri[:, 1], tri[:, 2])[np.arange(400), np.arange(400)]
+        assert np.abs(np.linalg.norm(cp - pts[b], axis=-1) - ref).max() < 1e-9
+        keep = off_surface(pts[b], verts[b], f)
+        assert keep.sum() > 350
+        assert np.array_equal(wind[b][keep], np.round(gt.winding_number_reference(verts[b], f, pts[b]))[keep])
+    with pytest.raises(ValueError, match="one set per mesh"):
+        mq.distances(torch.as_tensor(pts[:2]))
+
+
 def test_mesh_query_chunk_bound_does_not_change_results(sphere, rng):
     from volsmpl.mesh_query import MeshQuery
     v, f = (torch.as_tensor(x) for x in sphere)
