@@ -6,8 +6,10 @@
 #     tools/gpu_checks.sh bench              # `volsmpl bench --device cuda` (B = 1, 8; 60k points)
 #     tools/gpu_checks.sh apps               # hoi and motion CLIs on CUDA (small sets: costs and that they run)
 #     tools/gpu_checks.sh egohmr             # egohmr on CUDA: the test frames made there (no open3d), 16 sampled
+#     tools/gpu_checks.sh batch              # the training step's breakdown and a profile of one batch (~30 s)
 #     tools/gpu_checks.sh train SRC SECONDS  # resume the training run folder SRC on CUDA for about SECONDS, or start
-#                                            # the phase of config SRC (.json) from $INIT (default: the shipped asset)
+#                                            # the phase of config SRC (.json) from $INIT (default: the shipped asset);
+#                                            # no long run when the 20-step probe is slower than MAX_SPS (1.0 s/step)
 # e.g. SOURCE_COMMIT=<commit> bash tools/gpu_checks.sh train checkpoints/coap_pp 540 (one call; the run's latest
 # checkpoint comes back as $OUT/run.tar, or parts run.tar.00, ... when over 15 MiB: unpack it over
 # checkpoints/coap_pp/ and commit it). A VolumetricSMPL phase starts from its config (train
@@ -99,6 +101,10 @@ train)
     # 0.8: the step time drifts (0.22 -> 0.29 s over one session's chunks); the limit keeps the tarball below
     n=$(python3 -c "print(max(0, int(0.8 * ($end - $SECONDS - 40) / max(float('$sps'), 1e-3))))")
     echo "== $sps s/step over the probe's last window: $n more steps"
+    if python3 -c "import sys; sys.exit(0 if float('$sps') > float('${MAX_SPS:-1.0}') else 1)"; then
+        echo "== slower than MAX_SPS=${MAX_SPS:-1.0} s/step: no long run (profile the batch: tools/gpu_checks.sh batch)"
+        n=0
+    fi
     [ "$n" -gt 0 ] && step train $((end - SECONDS > 1 ? end - SECONDS : 1)) $V train --resume --out "$run" --device cuda \
         --max-steps "$n"
     latest=$(cat "$run/latest")
@@ -109,6 +115,10 @@ train)
     if [ "$(stat -c %s "$OUT/run.tar")" -gt $((15 * 1024 * 1024)) ]; then
         split -b 15M -d "$OUT/run.tar" "$OUT/run.tar." && rm "$OUT/run.tar"
     fi ;;
+batch)  # ~30 s: the training step's breakdown on the device and the profiler's view of one batch
+    step gt_profile 120 python3 tools/gt_profile.py --config checkpoints/volsmpl_b8q.json --device cuda \
+        --backends torch --steps 3 --trace
+    cp "$W/gt_profile.log" "$OUT"/ ;;
 *)
-    echo "usage: tools/gpu_checks.sh session|checks|bench|apps|egohmr|train SRC SECONDS" >&2; exit 2 ;;
+    echo "usage: tools/gpu_checks.sh session|checks|bench|apps|egohmr|batch|train SRC SECONDS" >&2; exit 2 ;;
 esac
