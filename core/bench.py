@@ -17,9 +17,11 @@ on every point, i.e. dense), 'coap-sparse' (COAP's network on the sparse engine)
 their accuracy columns are measured in that precision), 'volsmpl-tiles' / 'volsmpl-grouped' (the sparse engine
 with that pair decoder, `PAIR_DECODERS`, `Volume.pair_decoder`, whichever the default is), 'volsmpl-onechunk'
 (the lean path with the whole batch in one chunk and untiled decoders, `ONE_CHUNK`: its operator calls do not
-depend on B; the default 'volsmpl' keeps cache-sized chunks on the CPU, one body per chunk at 60k points), and
+depend on B; the default 'volsmpl' keeps cache-sized chunks on the CPU, one body per chunk at 60k points),
 'volsmpl-eager' (the no-grad encode run op by op, `EAGER_ENCODE`: `Volume.cuda_graphs` off; the default 'volsmpl'
-replays it from a CUDA graph on a GPU; on a CPU the two are the same). A model whose `attach_volume(body, model=...)` is not available is skipped with a note.
+replays it from a CUDA graph on a GPU; on a CPU the two are the same) and 'volsmpl-qgraph' (the no-grad lean query
+replayed from a CUDA graph too, `GRAPH_QUERIES`, `Volume.cuda_graph_queries`; on a CPU the same as 'volsmpl'). A
+model whose `attach_volume(body, model=...)` is not available is skipped with a note.
 
 A run measures:
   - the machine's fp32 matmul rate (`bench_jobs.matmul_rate`);
@@ -54,7 +56,8 @@ from .bench_jobs import bodybody_inputs, make_frames, matmul_rate, run_job
 from .bench_report import PAPER, caveats, compute_ratios, format_report, to_markdown
 from .provenance import machine_info
 
-__all__ = ["MODELS", "ENGINES", "PRECISIONS", "PAIR_DECODERS", "ONE_CHUNK", "EAGER_ENCODE", "BenchConfig", "model_available",
+__all__ = ["MODELS", "ENGINES", "PRECISIONS", "PAIR_DECODERS", "ONE_CHUNK", "EAGER_ENCODE", "GRAPH_QUERIES", "BenchConfig",
+           "model_available",
            "checkpoint_for", "bench_model",
            "bench_bodybody", "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
            "add_parser", "config_from_args", "run", "PAPER", "compute_ratios", "format_report", "to_markdown"]
@@ -72,6 +75,7 @@ MODELS: Dict[str, Tuple[str, bool]] = {
     "volsmpl-tiles": ("volsmpl", False),     # the sparse engine with the tiled pair decoder (Volume.pair_decoder)
     "volsmpl-grouped": ("volsmpl", False),   # the sparse engine with one grouped matmul per decoder layer
     "volsmpl-eager": ("volsmpl", False),     # the no-grad encode op by op (Volume.cuda_graphs off)
+    "volsmpl-qgraph": ("volsmpl", False),    # the no-grad lean query replayed from a CUDA graph (cuda_graph_queries)
 }
 
 #: benchmark model name -> Volume.engine of its sparse path (default 'lean')
@@ -84,6 +88,8 @@ PAIR_DECODERS: Dict[str, str] = {"volsmpl-tiles": "tiles", "volsmpl-grouped": "g
 ONE_CHUNK: Tuple[str, ...] = ("volsmpl-onechunk",)
 #: benchmark models whose no-grad encode runs op by op on a GPU (Volume.cuda_graphs off; the others replay a graph)
 EAGER_ENCODE: Tuple[str, ...] = ("volsmpl-eager",)
+#: benchmark models whose no-grad lean query replays a CUDA graph on a GPU (Volume.cuda_graph_queries)
+GRAPH_QUERIES: Tuple[str, ...] = ("volsmpl-qgraph",)
 
 
 @dataclass
@@ -214,7 +220,8 @@ def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optio
     job = {"spec": {"model": model, "dense": dense, "checkpoint": checkpoint, "init_seed": cfg.init_seed,
                     "engine": ENGINES.get(name, "lean"), "precision": PRECISIONS.get(name, "full"),
                     "one_chunk": name in ONE_CHUNK, "pair_decoder": PAIR_DECODERS.get(name),
-                    "cuda_graphs": name not in EAGER_ENCODE},
+                    "cuda_graphs": name not in EAGER_ENCODE,
+                    "cuda_graph_queries": name in GRAPH_QUERIES},
            "device": cfg.device, "threads": cfg.threads or torch.get_num_threads(), "warmup": cfg.warmup,
            "repeats": cfg.repeats, "budget_s": cfg.budget_s}
     r = run_job("volsmpl.bench_jobs:volume_job", job, inputs, cfg.timeout_s)

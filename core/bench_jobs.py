@@ -196,7 +196,8 @@ def build_volume(body, spec: dict):
     """The volume a job measures: spec {'model', 'dense', 'checkpoint' (or None: random init), 'init_seed',
     optional 'engine' (Volume.engine, default 'lean'), optional 'precision' (Volume.set_precision, default 'full'),
     optional 'one_chunk' (True: every query in one chunk, decoders untiled), optional 'pair_decoder'
-    (Volume.pair_decoder; None: the Volume's default), optional 'cuda_graphs' (Volume.cuda_graphs)}."""
+    (Volume.pair_decoder; None: the Volume's default), optional 'cuda_graphs' (Volume.cuda_graphs), 'cuda_graph_queries'
+    (Volume.cuda_graph_queries)}."""
     from .attach import attach_volume
 
     if spec.get("checkpoint"):
@@ -209,6 +210,7 @@ def build_volume(body, spec: dict):
     if spec.get("pair_decoder"):
         vol.pair_decoder = spec["pair_decoder"]
     vol.cuda_graphs = bool(spec.get("cuda_graphs", True))
+    vol.cuda_graph_queries = bool(spec.get("cuda_graph_queries", False))
     if spec["dense"] or spec.get("one_chunk"):
         # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
         # no cache tiling; 'one_chunk' does the same on the sparse path

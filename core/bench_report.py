@@ -26,7 +26,7 @@ PAPER = paper.bench_paper()
 RATIO_PAIRS = [("coap", "volsmpl"), ("coap-sparse", "volsmpl"), ("volsmpl-dense", "volsmpl"), ("coap", "coap-sparse"),
                ("volsmpl-chunked", "volsmpl"), ("volsmpl", "volsmpl-bf16"), ("volsmpl", "volsmpl-tf32"),
                ("coap", "volsmpl-bf16"), ("coap", "volsmpl-tf32"), ("volsmpl-onechunk", "volsmpl"),
-               ("volsmpl-eager", "volsmpl")]
+               ("volsmpl-eager", "volsmpl"), ("volsmpl", "volsmpl-qgraph"), ("coap", "volsmpl-qgraph")]
 
 
 # ---------------------------------------------------------------------------------------------- ratios

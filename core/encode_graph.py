@@ -32,6 +32,7 @@ from types import SimpleNamespace
 import torch
 
 INPUTS = ("vertices", "joints", "full_pose")  # what the encode reads of a body output
+BACKENDS = ("cuda", "emulate")  # real CUDA graphs, or the same bookkeeping with the function called again (tests)
 
 
 def map_tensors(fn, x):
@@ -67,7 +68,7 @@ class _Same:
         return isinstance(other, _Same) and other.obj is self.obj
 
 
-def _settings(modules) -> tuple:
+def settings_key(modules) -> tuple:
     """The plain settings (bool, int, float, str, None; dataclass configs by their repr, frozen ones by identity:
     a frozen config is replaced, not edited) of `modules` and their submodules, in a fixed order (each module's
     attribute order). ~0.15 ms for the shipped network and partition on one CPU thread (a sorted walk with every
@@ -93,20 +94,25 @@ def graph_key(modules, out) -> tuple:
     inputs = tuple((tuple(getattr(out, k).shape), getattr(out, k).dtype) for k in INPUTS)
     storage = tuple((t.data_ptr(), t.dtype, tuple(t.shape))
                     for m in modules for t in (*m.parameters(), *m.buffers()))
-    return (inputs, str(out.vertices.device), storage, _settings(modules), torch.get_float32_matmul_precision(),
+    return (inputs, str(out.vertices.device), storage, settings_key(modules), torch.get_float32_matmul_precision(),
             torch.backends.cuda.matmul.allow_tf32)
 
 
-class _Captured:
-    """One captured encode: static inputs, the graph (None when emulated) and its outputs."""
+class CapturedGraph:
+    """A function of named tensors captured once (static copies of its inputs, the graph, its outputs) and replayed.
 
-    def __init__(self, fn, out, backend: str):
-        self.static = SimpleNamespace(**{k: getattr(out, k).detach().clone() for k in INPUTS})
+    Args: fn: function of a namespace holding the inputs by name; inputs: {name: tensor} (cloned into the static
+    inputs); backend: 'cuda' or 'emulate' (fn called again at each replay, its outputs written into the captured
+    ones: the same bookkeeping on any device). Calling it with new inputs of the same shapes copies them in, replays,
+    and returns clones of the outputs (tensors, (named) tuples, lists, dataclasses: `map_tensors`)."""
+
+    def __init__(self, fn, inputs: dict, backend: str):
+        self.static = SimpleNamespace(**{k: v.detach().clone() for k, v in inputs.items()})
         self.fn, self.graph = fn, None
         if backend == "emulate":
             self.result = fn(self.static)
             return
-        device = out.vertices.device
+        device = next(iter(inputs.values())).device
         side = torch.cuda.Stream(device)
         side.wait_stream(torch.cuda.current_stream(device))
         with torch.cuda.stream(side):  # warm-up on a side stream, as capture requires (allocator, cuBLAS handles)
@@ -117,9 +123,9 @@ class _Captured:
         with torch.cuda.graph(self.graph):
             self.result = fn(self.static)
 
-    def __call__(self, out):
-        for k in INPUTS:
-            getattr(self.static, k).copy_(getattr(out, k))
+    def __call__(self, inputs: dict):
+        for k, v in inputs.items():
+            getattr(self.static, k).copy_(v)
         if self.graph is None:  # emulation: the function again, its outputs written into the captured ones
             new, held = [], []
             map_tensors(new.append, self.fn(self.static))
@@ -142,7 +148,7 @@ class EncodeGraphs:
     Attributes: captures, replays (counts), failed (keys whose capture failed: encoded eagerly).
     """
 
-    BACKENDS = ("cuda", "emulate")
+    BACKENDS = BACKENDS
 
     def __init__(self, capacity: int = 4, backend: str = "cuda"):
         if backend not in self.BACKENDS:
@@ -171,7 +177,7 @@ class EncodeGraphs:
         captured = self._graphs.get(key)
         if captured is None:
             try:
-                captured = _Captured(fn, out, self.backend)
+                captured = CapturedGraph(fn, {k: getattr(out, k) for k in INPUTS}, self.backend)
             except RuntimeError as e:  # an operation that cannot be captured
                 self.failed.add(key)
                 warnings.warn(f"the encode of this body output cannot be captured in a CUDA graph "
@@ -183,7 +189,7 @@ class EncodeGraphs:
                 self._graphs.popitem(last=False)
         self._graphs.move_to_end(key)
         self.replays += 1
-        return captured(out)
+        return captured({k: getattr(out, k) for k in INPUTS})
 
     def __deepcopy__(self, memo):
         """A copy without graphs (they hold device memory and the original's storage): it captures anew."""
@@ -195,4 +201,4 @@ class EncodeGraphs:
         self.failed.clear()
 
 
-__all__ = ["EncodeGraphs", "graph_key", "map_tensors", "INPUTS"]
+__all__ = ["EncodeGraphs", "CapturedGraph", "graph_key", "settings_key", "map_tensors", "INPUTS", "BACKENDS"]

@@ -33,8 +33,9 @@ from .nn.volsmpl_net import PartCode
 from .partition import Partition
 from .precision import check_precision, matmul_precision
 from .query_chunks import assemble_chunks, point_ranges
+from .query_graph import QueryGraphs
 from .self_penetration import SELFPEN_TAU, overlap_samples, reduce_selfpen, sdf_penalty
-from .validate import check_points
+from .validate import check_points, nonfinite_points_error
 from .volume_api import BodyVolume, check_output
 
 
@@ -69,6 +70,11 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
             encoded, also where a query needs only some). On by default: on an H200 at 60k points it took encode
             + query from 8.4 to 3.4 ms at B = 1 and 9.5 to 6.4 ms at B = 8 (docs/bench_cuda.md). No effect on a
             CPU or with autograd on (the apps' optimisation steps).
+        cuda_graph_queries: answer no-grad lean queries on CUDA by replaying a captured static-shape query
+            (volsmpl.query_graph: one per batch shape and pair capacity, learnt from the first, eager query of that
+            shape; the eager query's values up to rounding; one host read, as the eager one). Off by default until
+            measured on a GPU; needs an encoding of all parts (`cuda_graphs` makes those), full or tf32 precision,
+            and one lean chunk.
     """
 
     ENGINES = ("lean", "chunked")
@@ -76,7 +82,7 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
 
     def __init__(self, net: VolumetricSMPLNet, partition: Partition, fingerprint: str,
                  dense: bool = False, chunk_elems: int = 1 << 21, engine: str = "lean", pair_decoder: str = "tiles",
-                 precision: str = "full", cuda_graphs: bool = True):
+                 precision: str = "full", cuda_graphs: bool = True, cuda_graph_queries: bool = False):
         super().__init__()
         self.net = net
         self.partition = partition
@@ -97,6 +103,8 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         self.set_precision(precision)
         self.cuda_graphs = bool(cuda_graphs)
         self.encode_graphs = EncodeGraphs()  # the captured encodes (used when cuda_graphs is on)
+        self.cuda_graph_queries = bool(cuda_graph_queries)
+        self.query_graphs = QueryGraphs()    # the captured lean queries (used when cuda_graph_queries is on)
 
     def _frames(self, out):
         """Part transforms G (B, K, 4, 4) and padded part boxes (B, K, 3) x2 of a body output: no network."""
@@ -320,9 +328,23 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         B, N = points.shape[:2]
         if self._lean(dense):
             chunks = self._lean_chunks(B, N, points.device)
+            graph = (self.cuda_graph_queries and outside and len(chunks) == 1 and self.precision != "bf16"
+                     and self.query_graphs.supports(enc, points))
+            if graph:
+                with matmul_precision(self.precision, points.device):
+                    got = self.query_graphs.run(self, enc, points)
+                if got is not None:
+                    values, pairs, bad = got
+                    if nonfinite is not None and bad:
+                        raise nonfinite_points_error(int(nonfinite[0]), int(nonfinite[1]))
+                    self.decoder_evaluations += pairs
+                    return values
+            before = self.decoder_evaluations
             res = [self._query_lean(enc, points[b0:b1, s:e], b0, outside, nonfinite if i == 0 else None,
                                     pending if len(chunks) == 1 else None)
                    for i, (b0, b1, s, e) in enumerate(chunks)]
+            if graph:   # the capacity of this shape, for the next query of it
+                self.query_graphs.observe(points, self.num_parts, self.decoder_evaluations - before)
             return res[0] if len(res) == 1 else assemble_chunks(res, chunks, B, N)
         res = []
         for s, e in self._chunks(B, N):

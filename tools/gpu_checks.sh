@@ -45,11 +45,11 @@ step() {  # step NAME TIMEOUT CMD...: run with a wall-clock limit, log to $W/NAM
 case "${1:-}" in
 session)  # the engine's CUDA paths first (tests), then its figures; each step bounded so that the call ends in ~9 min
     step pytest_cuda 90 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
-        tests/test_encode_graph.py tests/test_partition.py tests/test_train.py tests/test_train_state.py tests/test_groundtruth.py
-    step bench_cuda 180 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-bf16,volsmpl-dense,coap \
+        tests/test_encode_graph.py tests/test_query_graph.py tests/test_partition.py tests/test_train.py tests/test_train_state.py tests/test_groundtruth.py
+    step bench_cuda 220 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,coap \
         --batch 1 8 --points 60000 --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody \
         --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
-    step bench_cuda_b32 60 $V bench --device cuda --models volsmpl,volsmpl-eager --batch 32 --points 60000 \
+    step bench_cuda_b32 80 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph --batch 32 --points 60000 \
         --repeats 5 --warmup 2 --budget 5 --quick --no-bodybody --out "$OUT/bench_cuda_b32.json"
     step profile 60 python3 docs/scripts/cuda_profile.py --device cuda --batch 1 8 --out "$W/prof"
     cp "$W/prof/cuda_profile.txt" "$OUT"/ 2>/dev/null
@@ -63,12 +63,12 @@ session)  # the engine's CUDA paths first (tests), then its figures; each step b
     cat "$W"/*.log > "$OUT/session.log" ;;
 checks)
     step pytest_cuda 170 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
-        tests/test_encode_graph.py tests/test_egohmr_app.py tests/test_groundtruth.py tests/test_partition.py tests/test_train.py tests/test_train_state.py
+        tests/test_encode_graph.py tests/test_query_graph.py tests/test_egohmr_app.py tests/test_groundtruth.py tests/test_partition.py tests/test_train.py tests/test_train_state.py
     step selfpen_cuda 120 $V selfpen --device cuda --model volsmpl,coap,mesh --render 2 --out "$W/selfpen"
     cp "$W"/*.log "$OUT"/ 2>/dev/null
     tar czf "$OUT/checks.tgz" -C "$W" . ;;
 bench)  # each (model, batch) runs in a fresh process (~20 s with CUDA start and profiling): keep the set small
-    step bench_cuda 330 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-bf16,volsmpl-tf32,volsmpl-dense,coap --batch 1 8 --points 60000 \
+    step bench_cuda 330 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,volsmpl-tf32,volsmpl-dense,coap --batch 1 8 --points 60000 \
         --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
     cp "$W/bench_cuda.log" "$OUT"/ ;;
 apps)  # the interaction database is built on the CPU side of that machine first (no open3d needed)

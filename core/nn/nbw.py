@@ -388,14 +388,14 @@ class NBWDecoder(nn.Module):
             x_local.requires_grad or any(w.requires_grad for w in Ws) or any(b.requires_grad for b in bs))
         tile_rows = self.tile_rows(x_local.device)
         if needs_grad or tile_rows is None:
-            h = self._mlp_chunks(xs, Ws, bs)
+            h = self.mlp_chunks(xs, Ws, bs)
         else:
             # Inference on the CPU: run all layers tile by tile so activations stay in cache and buffers are reused.
             tile = max(1, tile_rows // lay.chunk)
             h = xs.new_empty(n_chunks, lay.chunk, self.out_dim)
             for s in range(0, n_chunks, tile):
                 e = min(n_chunks, s + tile)
-                h[s:e] = self._mlp_chunks(xs[s:e], [W[s:e] for W in Ws], [b[s:e] for b in bs])
+                h[s:e] = self.mlp_chunks(xs[s:e], [W[s:e] for W in Ws], [b[s:e] for b in bs])
         h = h.reshape(n_chunks * lay.chunk, self.out_dim)[lay.slot]
         return h.squeeze(-1) if self.out_dim == 1 else h
 
@@ -449,8 +449,11 @@ class NBWDecoder(nn.Module):
         h = grouped_mlp(p, offs, mats, self.skip_layers)[:, :self.out_dim].to(x_local.dtype)
         return h.squeeze(-1) if self.out_dim == 1 else h
 
-    def _mlp_chunks(self, xs: torch.Tensor, Ws, bs) -> torch.Tensor:
-        """Decoder on chunked points. xs (C, n, 3); Ws[l] (C, in_pt_l, out_l); bs[l] (C, 1, out_l)."""
+    def mlp_chunks(self, xs: torch.Tensor, Ws, bs) -> torch.Tensor:
+        """The decoder on chunks of points, each chunk with its own weights (one batched matmul per layer).
+
+        Shape: xs (C, n, 3); Ws[l] (C, in_pt_l, out_l) (a layer's weights transposed); bs[l] (C, 1, out_l) -> (C, n,
+        out_dim). Used by `decode_pairs` and the static lean query (volsmpl.query_graph)."""
         p = positional_encoding(xs, self.pe_levels)                     # (C, n, x_dim)
         h = p
         for l in range(self.n_layers):

@@ -1,0 +1,193 @@
+"""The lean query in static shapes (`static_lean_query`) and its CUDA-graph replay (`QueryGraphs`, used by `Volume`
+when `query_graphs` is on).
+
+On a GPU the lean query of one body (volsmpl.lean_query) is ~180 small kernels and one host read of its pair counts:
+at B = 1 and 60k points the host issuing them, not the device, sets its 2.3 ms (docs/bench_cuda.md). Its shapes
+depend on the data (the (point, part) pairs inside boxes, the points in no box), so it cannot be captured as it is.
+`static_lean_query` computes the same values with shapes fixed by (B, N, K) and a pair `capacity`:
+
+  - the pairs are the first `capacity` (body, part, point) entries inside boxes (`torch.nonzero_static`, sorted by
+    (body, part)); the unused rows go to an extra, empty group whose results land in a discarded slot;
+  - the decoder runs on a group-contiguous layout of `chunk`-row chunks (as `NBWDecoder.decode_pairs`, each group's
+    last chunk padded) with a fixed number of chunks, capacity / chunk + groups, enough for any split of the pairs;
+  - every point gets its box distance (the eager path computes it only for the points in no box) and the points in
+    some box take the minimum of their parts' decoders instead.
+
+It returns the values with the number of pairs and of NaN / Inf points, read by the caller in one host read: when the
+pairs exceed the capacity the values are incomplete, and the caller answers eagerly instead and raises the capacity.
+
+`QueryGraphs` keeps one captured `static_lean_query` per (batch shape, points, capacity, precision) and replays it
+with the new encoding's tensors and points copied in (volsmpl.encode_graph.CapturedGraph). The capacity of a shape is
+learnt from the eager query it first answers (its pairs x `slack`, rounded up); a replay whose pairs overflow it raises
+it for the next capture.
+
+    graphs = QueryGraphs()
+    values = graphs.run(volume, enc, points, check_finite=True)   # None: answer eagerly (then graphs.observe(...))
+"""
+from __future__ import annotations
+
+import math
+import warnings
+from collections import OrderedDict
+
+import torch
+
+from .boxes import box_test
+from .encode_graph import BACKENDS, CapturedGraph, settings_key
+from .nn.analytic import outside_distance
+
+#: rows per chunk of the static decoder layout (one group's rows; its last chunk padded)
+STATIC_CHUNK = 256
+#: the capacity learnt from an eager query: its pairs times this, rounded up to CAPACITY_STEP
+SLACK = 1.15
+CAPACITY_STEP = 4096
+
+
+def static_lean_query(decoder, G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor, center, scale,
+                      weights, biases, points: torch.Tensor, capacity: int, chunk: int = STATIC_CHUNK):
+    """The lean query's values in shapes fixed by (B, N, K, capacity, chunk): no host reads (module docstring).
+
+    Shape: G (B, K, 4, 4), box_min/max (B, K, 3), center (B, K, 3) and scale (B, K, 1) of normalised parts (or both
+    None), weights[l] (B, K, out_l, in_l) and biases[l] (B, K, out_l) (NBWWeights of all K parts), points (B, N, 3)
+    -> values (B, N), pairs () int64 (the pairs inside boxes; the values are complete only when <= capacity),
+    nonfinite () int64 (points with a NaN or Inf coordinate).
+    """
+    B, N = points.shape[:2]
+    K = G.shape[1]
+    groups = B * K + 1                                                    # the last: unused rows of the capacity
+    u, q, q_max = box_test(points, G, box_min, box_max)                   # (B, N, K, 3), (B, N, K, 3), (B, N, K)
+    inside = q_max <= 0
+    by_part = inside.transpose(1, 2).contiguous()                         # (B, K, N): pairs sorted by (body, part)
+    pairs = by_part.sum()
+    idx = torch.nonzero_static(by_part, size=capacity, fill_value=-1)     # (capacity, 3)
+    used = idx[:, 0] >= 0
+    b, k, n = idx.clamp(min=0).unbind(1)
+    group = torch.where(used, b * K + k, groups - 1)                      # non-decreasing
+    ub = u[b, n, k]                                                       # (capacity, 3) box-centred coordinates
+    xin = ub / scale[b, k] if scale is not None else ub + 0.5 * (box_min + box_max)[b, k]
+    # group-contiguous chunks (NBWDecoder.decode_pairs' layout) with a fixed number of chunks
+    counts = torch.zeros(groups, dtype=torch.long, device=points.device).index_add_(0, group, torch.ones_like(group))
+    n_chunks = (counts + (chunk - 1)) // chunk
+    chunk_end = torch.cumsum(n_chunks, 0)
+    group_start = torch.cumsum(counts, 0) - counts
+    rank = torch.arange(capacity, device=points.device) - group_start[group]
+    slot = (chunk_end[group] - n_chunks[group] + torch.div(rank, chunk, rounding_mode="floor")) * chunk + rank % chunk
+    total = -(-capacity // chunk) + groups                                # >= sum(n_chunks) for any counts
+    src = torch.zeros(total * chunk, dtype=torch.long, device=points.device)
+    src[slot] = torch.arange(capacity, device=points.device)
+    chunk_group = torch.searchsorted(chunk_end, torch.arange(total, device=points.device), right=True)
+    chunk_group = chunk_group.clamp(max=groups - 1)
+    Ws, bs = [], []
+    for W, bias in zip(weights, biases):
+        W = W.reshape(B * K, *W.shape[2:])
+        Ws.append(torch.cat([W, W.new_zeros(1, *W.shape[1:])])[chunk_group].transpose(1, 2))
+        bias = bias.reshape(B * K, 1, bias.shape[-1])
+        bs.append(torch.cat([bias, bias.new_zeros(1, *bias.shape[1:])])[chunk_group])
+    h = decoder.mlp_chunks(xin[src].view(total, chunk, 3), Ws, bs)[..., 0].reshape(-1)[slot]   # (capacity,)
+    if scale is not None:
+        h = h * scale[b, k][:, 0]
+    target = torch.where(used, b * N + n, B * N)                          # unused rows: a discarded last slot
+    best = points.new_full((B * N + 1,), math.inf).scatter_reduce(0, target, h, "amin")[:-1].view(B, N)
+    free = ~inside.any(dim=-1)
+    box = outside_distance(q.reshape(B * N, K, 3), q_max.reshape(B * N, K)).view(B, N)
+    values = torch.where(free, box, best)
+    nonfinite = (~torch.isfinite(points)).any(dim=-1).sum()
+    return values, pairs, nonfinite
+
+
+class QueryGraphs:
+    """Captured `static_lean_query` calls of one volume (module docstring).
+
+    Args:
+        capacity: graphs kept at most (least recently used dropped first); backend: 'cuda' or 'emulate' (any
+        device: the function called again instead of a replay; for tests); chunk: rows per decoder chunk.
+    Attributes: captures, replays, overflows (replays whose pairs exceeded their capacity), failed (keys whose
+    capture failed: answered eagerly), capacities {(B, N, K): pairs}.
+    """
+
+    def __init__(self, capacity: int = 4, backend: str = "cuda", chunk: int = STATIC_CHUNK):
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        if capacity < 1 or chunk < 1:
+            raise ValueError(f"capacity and chunk must be >= 1, got {capacity} and {chunk}")
+        self.capacity, self.backend, self.chunk = int(capacity), backend, int(chunk)
+        self._graphs: OrderedDict = OrderedDict()
+        self.failed: set = set()
+        self.capacities: dict = {}
+        self.captures = self.replays = self.overflows = 0
+
+    def supports(self, enc, points: torch.Tensor) -> bool:
+        """Whether the query of `points` (B, N, 3) on `enc` can be replayed: autograd off, a CUDA query (any
+        device when emulating), an encoding of all parts."""
+        return (not torch.is_grad_enabled() and enc.slot is None and enc.code is not None
+                and (self.backend == "emulate" or points.is_cuda))
+
+    def observe(self, points: torch.Tensor, num_parts: int, pairs: int) -> None:
+        """Learn the capacity of the shape of `points` from the pairs an eager query of them had."""
+        need = max(CAPACITY_STEP, math.ceil(pairs * SLACK / CAPACITY_STEP) * CAPACITY_STEP)
+        shape = (*points.shape[:2], num_parts)
+        self.capacities[shape] = max(need, self.capacities.get(shape, 0))
+
+    def run(self, volume, enc, points: torch.Tensor):
+        """Values (B, N) of `volume`'s lean query of `points` on `enc` by a replay, pairs (int) and NaN/Inf points
+        (int) from one host read; None where there is no capacity for this shape yet, the capture failed, or the
+        pairs overflowed the capacity (raised then): the caller answers eagerly. Checks nothing else: see supports."""
+        B, N = points.shape[:2]
+        K = enc.G.shape[1]
+        cap = self.capacities.get((B, N, K))
+        if cap is None:
+            return None
+        code = enc.code.weights
+        inputs = {"points": points, "G": enc.G, "box_min": enc.box_min, "box_max": enc.box_max}
+        if enc.scale is not None:
+            inputs.update(center=enc.center, scale=enc.scale)
+        inputs.update({f"w{i}": w for i, w in enumerate(code.weights)})
+        inputs.update({f"b{i}": x for i, x in enumerate(code.biases)})
+        decoder = volume.net.decoder
+        key = (tuple((k, tuple(v.shape), v.dtype) for k, v in inputs.items()), str(points.device), cap, self.chunk,
+               settings_key((decoder,)), volume.precision, torch.get_float32_matmul_precision(),
+               torch.backends.cuda.matmul.allow_tf32)
+        if key in self.failed:
+            return None
+        n_layers = len(code.weights)
+
+        def fn(s):
+            return static_lean_query(decoder, s.G, s.box_min, s.box_max, getattr(s, "center", None),
+                                     getattr(s, "scale", None), [getattr(s, f"w{i}") for i in range(n_layers)],
+                                     [getattr(s, f"b{i}") for i in range(n_layers)], s.points, cap, self.chunk)
+
+        captured = self._graphs.get(key)
+        if captured is None:
+            try:
+                captured = CapturedGraph(fn, inputs, self.backend)
+            except RuntimeError as e:  # an operation that cannot be captured
+                self.failed.add(key)
+                warnings.warn(f"the lean query of this shape cannot be captured in a CUDA graph "
+                              f"({str(e).splitlines()[0]}); it runs eagerly.", RuntimeWarning, stacklevel=3)
+                return None
+            self.captures += 1
+            self._graphs[key] = captured
+            while len(self._graphs) > self.capacity:
+                self._graphs.popitem(last=False)
+        self._graphs.move_to_end(key)
+        self.replays += 1
+        values, pairs, bad = captured(inputs)
+        pairs, bad = torch.stack([pairs, bad]).tolist()                  # the query's one host read
+        if pairs > cap:
+            self.overflows += 1
+            self.observe(points, K, pairs)
+            return None
+        return values, pairs, bad
+
+    def __deepcopy__(self, memo):
+        """A copy without graphs (they hold device memory and the original's storage): it captures anew."""
+        return QueryGraphs(self.capacity, self.backend, self.chunk)
+
+    def clear(self) -> None:
+        """Drop every captured graph, the learnt capacities and the record of failed captures."""
+        self._graphs.clear()
+        self.failed.clear()
+        self.capacities.clear()
+
+
+__all__ = ["static_lean_query", "QueryGraphs", "STATIC_CHUNK", "SLACK", "CAPACITY_STEP"]
