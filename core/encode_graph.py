@@ -137,15 +137,17 @@ class CapturedGraph:
         return map_tensors(torch.Tensor.clone, self.result)
 
 
-class EncodeGraphs:
-    """Captured encodes of one volume, keyed by `graph_key` (module docstring).
+class GraphStore:
+    """Captured graphs by key (`CapturedGraph`), least recently used dropped first; a key whose capture failed is
+    remembered, and its caller runs eagerly from then on (one warning). The base of `EncodeGraphs` and
+    `volsmpl.query_graph.QueryGraphs`.
 
     Args:
-        capacity: graphs kept at most (each holds a memory pool; least recently used dropped first).
-        backend: 'cuda' (CUDA graphs; outputs on CUDA devices only) or 'emulate' (any device: the function is
-            called again instead of a replay; for tests).
+        capacity: graphs kept at most (each holds a memory pool).
+        backend: 'cuda' (CUDA graphs) or 'emulate' (any device: the function is called again instead of a replay;
+            for tests).
 
-    Attributes: captures, replays (counts), failed (keys whose capture failed: encoded eagerly).
+    Attributes: captures, replays (counts), failed (keys whose capture failed).
     """
 
     BACKENDS = BACKENDS
@@ -160,6 +162,41 @@ class EncodeGraphs:
         self.failed: set = set()
         self.captures = self.replays = 0
 
+    def replay(self, key, fn, inputs: dict, what: str):
+        """fn's outputs for `inputs` ({name: tensor}) by a replay of the graph captured under `key` (captured now
+        when new), or None when the key's capture failed (now or before). what: the thing captured, for the
+        warning."""
+        if key in self.failed:
+            return None
+        captured = self._graphs.get(key)
+        if captured is None:
+            try:
+                captured = CapturedGraph(fn, inputs, self.backend)
+            except RuntimeError as e:  # an operation that cannot be captured
+                self.failed.add(key)
+                warnings.warn(f"{what} cannot be captured in a CUDA graph ({str(e).splitlines()[0]}); it runs "
+                              f"eagerly.", RuntimeWarning, stacklevel=4)
+                return None
+            self.captures += 1
+            self._graphs[key] = captured
+            while len(self._graphs) > self.capacity:
+                self._graphs.popitem(last=False)
+        self._graphs.move_to_end(key)
+        self.replays += 1
+        return captured(inputs)
+
+    def clear(self) -> None:
+        """Drop every captured graph (and its memory pool) and the record of failed captures."""
+        self._graphs.clear()
+        self.failed.clear()
+
+
+class EncodeGraphs(GraphStore):
+    """Captured encodes of one volume, keyed by `graph_key` (module docstring); a `GraphStore`.
+
+    Args: capacity, backend: GraphStore's ('cuda': outputs on CUDA devices only).
+    """
+
     def supports(self, out) -> bool:
         """Whether `out` can be replayed here: a CUDA output (any device when emulating) with autograd off."""
         return not torch.is_grad_enabled() and (self.backend == "emulate" or out.vertices.is_cuda)
@@ -171,34 +208,12 @@ class EncodeGraphs:
         Shape: out.vertices (B, V, 3), out.joints (B, J', 3), out.full_pose (B, J*3); the result has fn's."""
         if not self.supports(out):
             return None
-        key = graph_key(modules, out)
-        if key in self.failed:
-            return None
-        captured = self._graphs.get(key)
-        if captured is None:
-            try:
-                captured = CapturedGraph(fn, {k: getattr(out, k) for k in INPUTS}, self.backend)
-            except RuntimeError as e:  # an operation that cannot be captured
-                self.failed.add(key)
-                warnings.warn(f"the encode of this body output cannot be captured in a CUDA graph "
-                              f"({str(e).splitlines()[0]}); it runs eagerly.", RuntimeWarning, stacklevel=3)
-                return None
-            self.captures += 1
-            self._graphs[key] = captured
-            while len(self._graphs) > self.capacity:
-                self._graphs.popitem(last=False)
-        self._graphs.move_to_end(key)
-        self.replays += 1
-        return captured({k: getattr(out, k) for k in INPUTS})
+        return self.replay(graph_key(modules, out), fn, {k: getattr(out, k) for k in INPUTS},
+                           "the encode of this body output")
 
     def __deepcopy__(self, memo):
         """A copy without graphs (they hold device memory and the original's storage): it captures anew."""
         return EncodeGraphs(self.capacity, self.backend)
 
-    def clear(self) -> None:
-        """Drop every captured graph (and its memory pool) and the record of failed captures."""
-        self._graphs.clear()
-        self.failed.clear()
 
-
-__all__ = ["EncodeGraphs", "CapturedGraph", "graph_key", "settings_key", "map_tensors", "INPUTS", "BACKENDS"]
+__all__ = ["EncodeGraphs", "GraphStore", "CapturedGraph", "graph_key", "settings_key", "map_tensors", "INPUTS", "BACKENDS"]

@@ -27,13 +27,11 @@ it for the next capture.
 from __future__ import annotations
 
 import math
-import warnings
-from collections import OrderedDict
 
 import torch
 
 from .boxes import box_test
-from .encode_graph import BACKENDS, CapturedGraph, settings_key
+from .encode_graph import GraphStore, settings_key
 from .nn.analytic import outside_distance
 
 #: rows per chunk of the static decoder layout (one group's rows; its last chunk padded)
@@ -95,26 +93,21 @@ def static_lean_query(decoder, G: torch.Tensor, box_min: torch.Tensor, box_max: 
     return values, pairs, nonfinite
 
 
-class QueryGraphs:
-    """Captured `static_lean_query` calls of one volume (module docstring).
+class QueryGraphs(GraphStore):
+    """Captured `static_lean_query` calls of one volume (module docstring); a `volsmpl.encode_graph.GraphStore`.
 
-    Args:
-        capacity: graphs kept at most (least recently used dropped first); backend: 'cuda' or 'emulate' (any
-        device: the function called again instead of a replay; for tests); chunk: rows per decoder chunk.
-    Attributes: captures, replays, overflows (replays whose pairs exceeded their capacity), failed (keys whose
-    capture failed: answered eagerly), capacities {(B, N, K): pairs}.
+    Args: capacity, backend: GraphStore's (graphs kept; 'cuda' or 'emulate'); chunk: rows per decoder chunk.
+    Attributes: GraphStore's, overflows (replays whose pairs exceeded their pair capacity), pair_capacities
+    {(B, N, K): pairs}.
     """
 
     def __init__(self, capacity: int = 4, backend: str = "cuda", chunk: int = STATIC_CHUNK):
-        if backend not in BACKENDS:
-            raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-        if capacity < 1 or chunk < 1:
-            raise ValueError(f"capacity and chunk must be >= 1, got {capacity} and {chunk}")
-        self.capacity, self.backend, self.chunk = int(capacity), backend, int(chunk)
-        self._graphs: OrderedDict = OrderedDict()
-        self.failed: set = set()
-        self.capacities: dict = {}
-        self.captures = self.replays = self.overflows = 0
+        super().__init__(capacity, backend)
+        if chunk < 1:
+            raise ValueError(f"chunk must be >= 1, got {chunk}")
+        self.chunk = int(chunk)
+        self.pair_capacities: dict = {}
+        self.overflows = 0
 
     def supports(self, enc, points: torch.Tensor) -> bool:
         """Whether the query of `points` (B, N, 3) on `enc` can be replayed: autograd off, a CUDA query (any
@@ -123,18 +116,19 @@ class QueryGraphs:
                 and (self.backend == "emulate" or points.is_cuda))
 
     def observe(self, points: torch.Tensor, num_parts: int, pairs: int) -> None:
-        """Learn the capacity of the shape of `points` from the pairs an eager query of them had."""
+        """Learn the pair capacity of the shape of `points` from the pairs an eager query of them had."""
         need = max(CAPACITY_STEP, math.ceil(pairs * SLACK / CAPACITY_STEP) * CAPACITY_STEP)
         shape = (*points.shape[:2], num_parts)
-        self.capacities[shape] = max(need, self.capacities.get(shape, 0))
+        self.pair_capacities[shape] = max(need, self.pair_capacities.get(shape, 0))
 
     def run(self, volume, enc, points: torch.Tensor):
         """Values (B, N) of `volume`'s lean query of `points` on `enc` by a replay, pairs (int) and NaN/Inf points
-        (int) from one host read; None where there is no capacity for this shape yet, the capture failed, or the
-        pairs overflowed the capacity (raised then): the caller answers eagerly. Checks nothing else: see supports."""
+        (int) from one host read; None where there is no pair capacity for this shape yet, the capture failed, or
+        the pairs overflowed the capacity (raised then): the caller answers eagerly. Checks nothing else: see
+        supports."""
         B, N = points.shape[:2]
         K = enc.G.shape[1]
-        cap = self.capacities.get((B, N, K))
+        cap = self.pair_capacities.get((B, N, K))
         if cap is None:
             return None
         code = enc.code.weights
@@ -147,8 +141,6 @@ class QueryGraphs:
         key = (tuple((k, tuple(v.shape), v.dtype) for k, v in inputs.items()), str(points.device), cap, self.chunk,
                settings_key((decoder,)), volume.precision, torch.get_float32_matmul_precision(),
                torch.backends.cuda.matmul.allow_tf32)
-        if key in self.failed:
-            return None
         n_layers = len(code.weights)
 
         def fn(s):
@@ -156,22 +148,10 @@ class QueryGraphs:
                                      getattr(s, "scale", None), [getattr(s, f"w{i}") for i in range(n_layers)],
                                      [getattr(s, f"b{i}") for i in range(n_layers)], s.points, cap, self.chunk)
 
-        captured = self._graphs.get(key)
-        if captured is None:
-            try:
-                captured = CapturedGraph(fn, inputs, self.backend)
-            except RuntimeError as e:  # an operation that cannot be captured
-                self.failed.add(key)
-                warnings.warn(f"the lean query of this shape cannot be captured in a CUDA graph "
-                              f"({str(e).splitlines()[0]}); it runs eagerly.", RuntimeWarning, stacklevel=3)
-                return None
-            self.captures += 1
-            self._graphs[key] = captured
-            while len(self._graphs) > self.capacity:
-                self._graphs.popitem(last=False)
-        self._graphs.move_to_end(key)
-        self.replays += 1
-        values, pairs, bad = captured(inputs)
+        got = self.replay(key, fn, inputs, "the lean query of this shape")
+        if got is None:
+            return None
+        values, pairs, bad = got
         pairs, bad = torch.stack([pairs, bad]).tolist()                  # the query's one host read
         if pairs > cap:
             self.overflows += 1
@@ -184,10 +164,9 @@ class QueryGraphs:
         return QueryGraphs(self.capacity, self.backend, self.chunk)
 
     def clear(self) -> None:
-        """Drop every captured graph, the learnt capacities and the record of failed captures."""
-        self._graphs.clear()
-        self.failed.clear()
-        self.capacities.clear()
+        """Drop every captured graph, the record of failed captures and the learnt pair capacities."""
+        super().clear()
+        self.pair_capacities.clear()
 
 
 __all__ = ["static_lean_query", "QueryGraphs", "STATIC_CHUNK", "SLACK", "CAPACITY_STEP"]

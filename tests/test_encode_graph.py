@@ -160,3 +160,21 @@ def test_cuda_backend_leaves_cpu_outputs_to_the_eager_encode(tiny_config):
     with torch.no_grad():
         _assert_equal(vol.encode(o1, fresh=True), vol._encode_eager(o1, None))
     assert vol.encode_graphs.captures == 0
+
+
+def test_a_failed_capture_is_remembered_and_warned_once():
+    from volsmpl.encode_graph import GraphStore
+
+    calls = []
+
+    def broken(s):
+        calls.append(1)
+        raise RuntimeError("operation not permitted when stream is capturing\nmore")
+
+    store = GraphStore(backend="emulate")
+    x = {"x": torch.ones(3)}
+    with pytest.warns(RuntimeWarning, match="cannot be captured.*operation not permitted"):
+        assert store.replay("k", broken, x, "the thing") is None
+    assert store.replay("k", broken, x, "the thing") is None     # remembered: not tried again
+    assert len(calls) == 1 and store.failed == {"k"} and store.captures == 0
+    assert torch.equal(store.replay("j", lambda s: s.x * 2, x, "the thing"), torch.full((3,), 2.0))

@@ -69,7 +69,7 @@ def test_volume_replays_after_one_eager_query(tiny_config, device):
     g = vol.query_graphs
     with torch.no_grad():
         first = vol.query(out, _points(out, 600, 4))             # eager: learns the capacity
-        assert g.captures == 0 and len(g.capacities) == 1
+        assert g.captures == 0 and len(g.pair_capacities) == 1
         out2 = body(**{k: v.to(device) for k, v in random_pose(2, seed=7).items()})
         pts = _points(out2, 600, 5)
         before = vol.decoder_evaluations
@@ -84,16 +84,23 @@ def test_volume_replays_after_one_eager_query(tiny_config, device):
     assert first.shape == got.shape == (2, 1208)
 
 
-def test_overflow_answers_eagerly_and_raises_the_capacity(tiny_config):
-    _, vol, out = _setup(tiny_config, "cpu")
-    g = vol.query_graphs
-    pts = _points(out, 600, 6)
+def _after_one_query(config, n, seed):
+    """A CPU volume (emulated graphs) whose first, eager query of `n` points has set their shape's pair capacity:
+    (volume, body output, points, its QueryGraphs)."""
+    _, vol, out = _setup(config, "cpu")
+    pts = _points(out, n, seed)
     with torch.no_grad():
         vol.query(out, pts)
-        shape = next(iter(g.capacities))
-        g.capacities[shape] = 16                                 # below this query's pairs
+    return vol, out, pts, vol.query_graphs
+
+
+def test_overflow_answers_eagerly_and_raises_the_capacity(tiny_config):
+    vol, out, pts, g = _after_one_query(tiny_config, 600, 6)
+    with torch.no_grad():
+        shape = next(iter(g.pair_capacities))
+        g.pair_capacities[shape] = 16                                 # below this query's pairs
         got = vol.query(out, pts)                                # replay overflows: eager answer
-        assert g.overflows == 1 and g.capacities[shape] >= vol.decoder_evaluations // 2
+        assert g.overflows == 1 and g.pair_capacities[shape] >= vol.decoder_evaluations // 2
         again = vol.query(out, pts)                              # the larger capacity: captured anew, replayed
         assert g.captures == 2 and g.replays == 2 and g.overflows == 1
         vol.cuda_graph_queries = False
@@ -103,11 +110,8 @@ def test_overflow_answers_eagerly_and_raises_the_capacity(tiny_config):
 
 
 def test_nonfinite_points_and_where_no_graph_serves(tiny_config):
-    _, vol, out = _setup(tiny_config, "cpu")
-    g = vol.query_graphs
-    pts = _points(out, 300, 8)
+    vol, out, pts, g = _after_one_query(tiny_config, 300, 8)
     with torch.no_grad():
-        vol.query(out, pts)
         bad = pts.clone()
         bad[1, 5, 0] = float("nan")
         with pytest.raises(ValueError, match="NaN"):
