@@ -41,10 +41,11 @@ def _points(out, n, seed):
     return torch.cat([near, spread, far], dim=1)
 
 
+@pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("normalize", [True, False])
-def test_static_query_equals_the_eager_query(tiny_config, normalize):
+def test_static_query_equals_the_eager_query(tiny_config, normalize, device):
     cfg = dataclasses.replace(tiny_config, normalize_parts=normalize)
-    _, vol, out = _setup(cfg, "cpu")
+    _, vol, out = _setup(cfg, device)
     pts = _points(out, 700, 3)
     with torch.no_grad():
         enc = vol.encode(out)
