@@ -64,6 +64,14 @@ def test_contact_methods_agree(body):
         contact_vertices(v, body.v_template, method="grid")
 
 
+@pytest.mark.cuda
+def test_contact_vertices_on_cuda_match_the_kd_tree(body):
+    """'auto' on CUDA takes the torch grid there: the k-d tree's mask on the CPU."""
+    v = _posed(body, torch.cat([named_pose("sitting"), named_pose("t_pose")]))
+    got = contact_vertices(v.cuda(), body.v_template.cuda())
+    assert got.device.type == "cuda" and torch.equal(got.cpu(), contact_vertices(v, body.v_template, method="kdtree"))
+
+
 def test_contact_poses_touch_more_than_realistic_ones(body):
     e = sample_contact_euler(16, seed=3)
     pose = euler_to_body_pose(e)

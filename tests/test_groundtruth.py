@@ -621,3 +621,20 @@ def test_torch_backend_on_cuda_matches_cpu(sphere, rng):
     cpu = gt.batch_sdf(torch.as_tensor(v)[None], f, p, backend="torch")
     gpu = gt.batch_sdf(torch.as_tensor(v)[None].cuda(), f, p.cuda(), backend="auto")
     assert gpu.device.type == "cuda" and torch.allclose(gpu.cpu(), cpu, atol=1e-12)
+
+
+@pytest.mark.cuda
+def test_batched_torch_ground_truth_on_cuda_matches_cpu(default_body_mesh):
+    """One MeshQuery for a batch of posed bodies on CUDA (the training batch's ground truth there) against the same
+    on the CPU: equal signs, distances to 1e-9 m."""
+    from volsmpl.body.poses import named_pose
+    body, _ = default_body_mesh
+    with torch.no_grad():
+        verts = body(body_pose=torch.cat([named_pose("arms_crossed"), named_pose("squatting")])).vertices.double()
+    g = torch.Generator().manual_seed(2)
+    pts = verts[:, torch.randint(verts.shape[1], (3000,), generator=g)] \
+        + 0.02 * torch.randn(2, 3000, 3, generator=g, dtype=torch.float64)
+    cpu = gt.batch_sdf(verts, body.faces, pts, backend="torch")
+    gpu = gt.batch_sdf(verts.cuda(), body.faces, pts.cuda(), backend="auto")
+    assert gpu.device.type == "cuda"
+    assert torch.equal(gpu.cpu() < 0, cpu < 0) and (gpu.cpu() - cpu).abs().max() < 1e-9

@@ -6,7 +6,7 @@
 #     tools/gpu_checks.sh bench              # `volsmpl bench --device cuda` (B = 1, 8; 60k points)
 #     tools/gpu_checks.sh apps               # hoi and motion CLIs on CUDA (small sets: costs and that they run)
 #     tools/gpu_checks.sh egohmr             # egohmr on CUDA: the test frames made there (no open3d), 16 sampled
-#     tools/gpu_checks.sh batch              # the training step's breakdown and a profile of one batch (~30 s)
+#     tools/gpu_checks.sh batch              # the batch maker's cuda tests, the step's breakdown, a batch's profile (~60 s)
 #     tools/gpu_checks.sh train SRC SECONDS  # resume the training run folder SRC on CUDA for about SECONDS, or start
 #                                            # the phase of config SRC (.json) from $INIT (default: the shipped asset);
 #                                            # no long run when the 20-step probe is slower than MAX_SPS (1.0 s/step)
@@ -45,7 +45,8 @@ step() {  # step NAME TIMEOUT CMD...: run with a wall-clock limit, log to $W/NAM
 case "${1:-}" in
 session)  # the engine's CUDA paths first (tests), then its figures; each step bounded so that the call ends in ~9 min
     step pytest_cuda 90 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
-        tests/test_encode_graph.py tests/test_query_graph.py tests/test_partition.py tests/test_train.py tests/test_train_state.py tests/test_groundtruth.py
+        tests/test_encode_graph.py tests/test_query_graph.py tests/test_partition.py tests/test_train.py tests/test_train_state.py tests/test_groundtruth.py \
+        tests/test_contact_training.py
     step bench_cuda 220 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,coap \
         --batch 1 8 --points 60000 --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody \
         --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
@@ -115,10 +116,12 @@ train)
     if [ "$(stat -c %s "$OUT/run.tar")" -gt $((15 * 1024 * 1024)) ]; then
         split -b 15M -d "$OUT/run.tar" "$OUT/run.tar." && rm "$OUT/run.tar"
     fi ;;
-batch)  # ~30 s: the training step's breakdown on the device and the profiler's view of one batch
+batch)  # ~60 s: the batch maker's device paths against the CPU, the step's breakdown and a profile of one batch
+    step pytest_batch 60 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_groundtruth.py \
+        tests/test_contact_training.py
     step gt_profile 120 python3 tools/gt_profile.py --config checkpoints/volsmpl_b8q.json --device cuda \
         --backends torch --steps 3 --trace
-    cp "$W/gt_profile.log" "$OUT"/ ;;
+    cp "$W/pytest_batch.log" "$W/gt_profile.log" "$OUT"/ ;;
 *)
     echo "usage: tools/gpu_checks.sh session|checks|bench|apps|egohmr|batch|train SRC SECONDS" >&2; exit 2 ;;
 esac
