@@ -7,8 +7,7 @@ labels, so this needs no part table and works for any SMPL-family body. Exact, b
 same result: 'kdtree' (scipy's k-d tree finds every pair within the radius, on the CPU: ~30 ms a body on one thread)
 or 'torch' (a uniform grid of cells as wide as the radius, every vertex against the vertices of its 27 cells, in
 float64 on the vertices' device: a training batch on a GPU, where the copy to the host and the k-d tree took most
-of the batch's time). 'auto': the k-d tree for CPU tensors,
-torch elsewhere.
+of the batch's time). 'auto': the k-d tree for CPU tensors, torch elsewhere.
 
     mask = contact_vertices(posed.vertices, body.v_template)      # (B, V) bool
     # training queries around them: volsmpl.training_queries.sample_contact_points
@@ -38,7 +37,7 @@ def contact_vertices(vertices: torch.Tensor, rest_vertices: torch.Tensor, radius
     if vertices.dim() != 3 or vertices.shape[-1] != 3:
         raise ValueError(f"contact_vertices expects vertices (B, V, 3), got {tuple(vertices.shape)}")
     B, V = vertices.shape[:2]
-    shared = rest_vertices.dim() == 2   # one rest shape for every body: its distances are computed once per block
+    shared = rest_vertices.dim() == 2   # one rest shape for every body (not expanded: indexed per body)
     rest = rest_vertices.unsqueeze(0) if shared else rest_vertices
     if tuple(rest.shape[1:]) != (V, 3) or len(rest) not in ((1,) if shared else (B,)):
         raise ValueError(f"contact_vertices: rest_vertices {tuple(rest_vertices.shape)} do not match vertices {(B, V, 3)}")

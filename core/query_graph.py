@@ -1,5 +1,5 @@
 """The lean query in static shapes (`static_lean_query`) and its CUDA-graph replay (`QueryGraphs`, used by `Volume`
-when `query_graphs` is on).
+when `cuda_graph_queries` is on).
 
 On a GPU the lean query of one body (volsmpl.lean_query) is ~180 small kernels and one host read of its pair counts:
 at B = 1 and 60k points the host issuing them, not the device, sets its 2.3 ms (docs/bench_cuda.md). Its shapes
@@ -8,8 +8,9 @@ depend on the data (the (point, part) pairs inside boxes, the points in no box),
 
   - the pairs are the first `capacity` (body, part, point) entries inside boxes (`torch.nonzero_static`, sorted by
     (body, part)); the unused rows go to an extra, empty group whose results land in a discarded slot;
-  - the decoder runs on a group-contiguous layout of `chunk`-row chunks (as `NBWDecoder.decode_pairs`, each group's
-    last chunk padded) with a fixed number of chunks, capacity / chunk + groups, enough for any split of the pairs;
+  - the decoder runs on the group-contiguous layout of `chunk`-row chunks of `NBWDecoder.decode_pairs`
+    (`nn.nbw.group_pairs`, each group's last chunk padded) with a fixed number of chunks, capacity / chunk + groups,
+    enough for any split of the pairs;
   - every point gets its box distance (the eager path computes it only for the points in no box) and the points in
     some box take the minimum of their parts' decoders instead.
 
@@ -22,7 +23,8 @@ learnt from the eager query it first answers (its pairs x `slack`, rounded up); 
 it for the next capture.
 
     graphs = QueryGraphs()
-    values = graphs.run(volume, enc, points, check_finite=True)   # None: answer eagerly (then graphs.observe(...))
+    got = graphs.run(volume, enc, points)   # (values, pairs, NaN points), or None: answer eagerly, then
+    graphs.observe(points, K, pairs)        # the eager query's pairs set the capacity of that shape
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ import torch
 from .boxes import box_test
 from .encode_graph import GraphStore, settings_key
 from .nn.analytic import outside_distance
+from .nn.nbw import group_pairs
 
 #: rows per chunk of the static decoder layout (one group's rows; its last chunk padded)
 STATIC_CHUNK = 256
@@ -62,28 +65,20 @@ def static_lean_query(decoder, G: torch.Tensor, box_min: torch.Tensor, box_max: 
     b, k, n = idx.clamp(min=0).unbind(1)
     group = torch.where(used, b * K + k, groups - 1)                      # non-decreasing
     ub = u[b, n, k]                                                       # (capacity, 3) box-centred coordinates
-    xin = ub / scale[b, k] if scale is not None else ub + 0.5 * (box_min + box_max)[b, k]
-    # group-contiguous chunks (NBWDecoder.decode_pairs' layout) with a fixed number of chunks
-    counts = torch.zeros(groups, dtype=torch.long, device=points.device).index_add_(0, group, torch.ones_like(group))
-    n_chunks = (counts + (chunk - 1)) // chunk
-    chunk_end = torch.cumsum(n_chunks, 0)
-    group_start = torch.cumsum(counts, 0) - counts
-    rank = torch.arange(capacity, device=points.device) - group_start[group]
-    slot = (chunk_end[group] - n_chunks[group] + torch.div(rank, chunk, rounding_mode="floor")) * chunk + rank % chunk
-    total = -(-capacity // chunk) + groups                                # >= sum(n_chunks) for any counts
-    src = torch.zeros(total * chunk, dtype=torch.long, device=points.device)
-    src[slot] = torch.arange(capacity, device=points.device)
-    chunk_group = torch.searchsorted(chunk_end, torch.arange(total, device=points.device), right=True)
-    chunk_group = chunk_group.clamp(max=groups - 1)
+    sc = scale[b, k] if scale is not None else None                       # (capacity, 1)
+    xin = ub / sc if sc is not None else ub + 0.5 * (box_min + box_max)[b, k]
+    # NBWDecoder.decode_pairs' group-contiguous chunks, with a fixed number of chunks (enough for any split)
+    lay = group_pairs(group, groups, chunk, group_sorted=True, n_chunks_total=-(-capacity // chunk) + groups)
     Ws, bs = [], []
     for W, bias in zip(weights, biases):
         W = W.reshape(B * K, *W.shape[2:])
-        Ws.append(torch.cat([W, W.new_zeros(1, *W.shape[1:])])[chunk_group].transpose(1, 2))
+        Ws.append(torch.cat([W, W.new_zeros(1, *W.shape[1:])])[lay.chunk_group].transpose(1, 2))
         bias = bias.reshape(B * K, 1, bias.shape[-1])
-        bs.append(torch.cat([bias, bias.new_zeros(1, *bias.shape[1:])])[chunk_group])
-    h = decoder.mlp_chunks(xin[src].view(total, chunk, 3), Ws, bs)[..., 0].reshape(-1)[slot]   # (capacity,)
-    if scale is not None:
-        h = h * scale[b, k][:, 0]
+        bs.append(torch.cat([bias, bias.new_zeros(1, *bias.shape[1:])])[lay.chunk_group])
+    xs = xin[lay.src].view(len(lay.chunk_group), chunk, 3)
+    h = decoder.mlp_chunks(xs, Ws, bs)[..., 0].reshape(-1)[lay.slot]     # (capacity,)
+    if sc is not None:
+        h = h * sc[:, 0]
     target = torch.where(used, b * N + n, B * N)                          # unused rows: a discarded last slot
     best = points.new_full((B * N + 1,), math.inf).scatter_reduce(0, target, h, "amin")[:-1].view(B, N)
     free = ~inside.any(dim=-1)

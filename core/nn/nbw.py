@@ -100,7 +100,8 @@ def group_counts(group: torch.Tensor, n_groups: int) -> torch.Tensor:
 
 
 def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional[torch.Tensor] = None,
-                counts_host: Optional[list] = None, group_sorted: bool = False) -> PairLayout:
+                counts_host: Optional[list] = None, group_sorted: bool = False,
+                n_chunks_total: Optional[int] = None) -> PairLayout:
     """Sort pairs by group and cut every group into chunks of ``chunk`` rows (last one padded).
 
     Each chunk holds pairs of a single group, so a layer is one batched matmul over chunks with
@@ -114,6 +115,9 @@ def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional
             (the layout then needs no host sync of its own; else one, for the number of chunks).
         group_sorted: the caller guarantees `group` is non-decreasing (no sort is made; unsorted input then gives
             a wrong layout).
+        n_chunks_total: a fixed number of chunks, at least the layout's (e.g. ceil(M / chunk) + n_groups): no host
+            sync and shapes set by (M, chunk, n_chunks_total) alone (volsmpl.query_graph captures it); the chunks past
+            the layout's are given to the last group and hold pair 0.
     Returns:
         :class:`PairLayout`.
     """
@@ -121,7 +125,8 @@ def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional
     dev = group.device
     counts = group_counts(group, n_groups) if counts is None else counts   # (G,)
     n_chunks = (counts + (chunk - 1)) // chunk                          # (G,)
-    chunk_start = torch.cumsum(n_chunks, 0) - n_chunks
+    chunk_end = torch.cumsum(n_chunks, 0)
+    chunk_start = chunk_end - n_chunks
     group_start = torch.cumsum(counts, 0) - counts
     order = torch.arange(M, device=dev) if group_sorted else torch.argsort(group, stable=True)   # (M,)
     gs = group if group_sorted else group[order]
@@ -129,10 +134,16 @@ def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional
     slot_sorted = (chunk_start[gs] + torch.div(rank, chunk, rounding_mode="floor")) * chunk + rank % chunk
     slot = torch.empty_like(slot_sorted)
     slot[order] = slot_sorted
-    total = int(n_chunks.sum()) if counts_host is None else sum((c + chunk - 1) // chunk for c in counts_host)
+    if n_chunks_total is not None:
+        total = int(n_chunks_total)
+    else:
+        total = int(n_chunks.sum()) if counts_host is None else sum((c + chunk - 1) // chunk for c in counts_host)
     src = torch.zeros(total * chunk, dtype=torch.long, device=dev)
     src[slot_sorted] = order
-    chunk_group = torch.repeat_interleave(torch.arange(n_groups, device=dev), n_chunks, output_size=total)
+    if n_chunks_total is None:
+        chunk_group = torch.repeat_interleave(torch.arange(n_groups, device=dev), n_chunks, output_size=total)
+    else:
+        chunk_group = torch.searchsorted(chunk_end, torch.arange(total, device=dev), right=True).clamp(max=n_groups - 1)
     return PairLayout(src, slot, chunk_group, chunk)
 
 
