@@ -215,7 +215,7 @@ def build_volume(body, spec: dict):
         # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
         # no cache tiling; 'one_chunk' does the same on the sparse path
         vol.chunk_elems = vol.cpu_chunk_elems = vol.gpu_chunk_elems = 1 << 62
-        vol.net.set_tile_rows(1 << 62)
+        vol.net.set_tile_rows(None)
     return vol
 
 

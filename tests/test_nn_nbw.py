@@ -351,3 +351,35 @@ def test_decode_pairs_with_host_counts_equals_without_and_checks_them():
         for bad in (counts[:-1], counts[:-1] + [counts[-1] + 1]):
             with pytest.raises(ValueError, match="counts_host must hold 12 group counts summing to the 150 pairs"):
                 m.decode_pairs(x, bi, pi, gen, counts_host=bad)
+
+
+@pytest.mark.parametrize("sorted_pairs", [True, False])
+def test_decode_rows_cpu_path_equals_naive_per_point_decoder(monkeypatch, sorted_pairs):
+    """The no-grad CPU path (volsmpl.nn.group_rows: each group's rows through its own weights, in tiles) against
+    the naive decoder (latent concatenated per point, no folding): groups left empty, groups over several tiles,
+    a skip on the last layer, two outputs, pairs given sorted or not."""
+    m = _tiny(K=4, n_layers=4, skip_layers=(1, 3), out_dim=2)
+    monkeypatch.setattr(NBWDecoder, "TILE_ROWS", 7)
+    g = torch.Generator().manual_seed(5)
+    B, K, M = 3, 4, 120
+    z = torch.randn(B, K, 5, dtype=torch.float64, generator=g)
+    x = torch.randn(M, 3, dtype=torch.float64, generator=g) * 0.5
+    bi = torch.randint(0, B, (M,), generator=g)
+    pi = torch.randint(0, 3, (M,), generator=g)               # part 3 of every body empty
+    pi[bi == 1] = 0                                           # body 1 in one group of 40-odd rows (7 tiles)
+    if sorted_pairs:
+        order = torch.argsort(bi * K + pi, stable=True)
+        x, bi, pi = x[order], bi[order], pi[order]
+    full = m.blended_weights(z)
+    u = torch.cat([positional_encoding(x, m.pe_levels), z[bi, pi]], -1)
+    h = u
+    for l, W in enumerate(full):                              # per point with its own (body, part) weights
+        if l in m.skip_layers:
+            h = torch.cat([h, u], -1)
+        h = torch.einsum("moi,mi->mo", W[bi, pi], h) + m.base_bias[l]
+        if l < m.n_layers - 1:
+            h = torch.relu(h)
+    with torch.no_grad():
+        y = m.decode_pairs(x, bi, pi, m.generate(z), group_sorted=sorted_pairs)
+    assert y.shape == (M, 2)
+    torch.testing.assert_close(y, h)

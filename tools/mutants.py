@@ -149,6 +149,13 @@ MUTANTS = {
     "frozen_configs_left_out_of_the_graph_key": ("core/encode_graph.py", "_Same(value) if kind.__dataclass_params__.frozen else repr(value)",
                                                  "None if kind.__dataclass_params__.frozen else repr(value)",
                                                  [T + "test_encode_graph.py::test_settings_batch_and_autograd_decide_the_graph"]),
+    # the CPU decoder on group rows (2026-11-27)
+    "group_rows_tiles_read_the_first": ("core/nn/group_rows.py", "pe = p[s:e]", "pe = p[start:start + e - s]",
+                                       [T + "test_nn_nbw.py::test_decode_rows_cpu_path_equals_naive_per_point_decoder"]),
+    "group_rows_unsorted_left_sorted": ("core/nn/nbw.py", "h = torch.empty_like(h).index_put_((order,), h)", "pass",
+                                        [T + "test_nn_nbw.py::test_decode_rows_cpu_path_equals_naive_per_point_decoder"]),
+    "group_rows_skip_reads_h_only": ("core/nn/group_rows.py", ".addmm_(pe, Wt[l][hidden:])", ".add_(0)",
+                                     [T + "test_nn_nbw.py::test_decode_rows_cpu_path_equals_naive_per_point_decoder"]),
 }
 
 

@@ -342,7 +342,7 @@ class CoapNet(nn.Module):
         R = x.shape[0]
         needs_grad = torch.is_grad_enabled() and (
             x.requires_grad or any(t.requires_grad for t in tabs) or any(p.requires_grad for p in self.parameters()))
-        if needs_grad or R <= self.TILE_ROWS or x.device.type != "cpu":
+        if needs_grad or self.TILE_ROWS is None or R <= self.TILE_ROWS or x.device.type != "cpu":
             return torch.sigmoid(-self._rows(x, group, tabs, flag))
         out = x.new_empty(R)
         for s in range(0, R, self.TILE_ROWS):
@@ -398,9 +398,9 @@ class CoapNet(nn.Module):
         return self._run(x_local, group, self._tables(code, False), None)
 
     # ------------------------------------------------------------------ costs
-    def set_tile_rows(self, rows: int) -> None:
-        """Rows per cache tile of the no-grad path (benchmarks of one-pass evaluation set it very large)."""
-        self.TILE_ROWS = int(rows)
+    def set_tile_rows(self, rows: int | None) -> None:
+        """Rows per cache tile of the no-grad path on the CPU; None: no tiles (benchmarks of one-pass evaluation)."""
+        self.TILE_ROWS = None if rows is None else int(rows)
 
     def flops_per_pair(self) -> int:
         """2 x multiply-accumulates of one pair through query encoder + decoder, after folding

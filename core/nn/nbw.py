@@ -34,6 +34,7 @@ from typing import NamedTuple, Optional, Sequence, Tuple
 import torch
 from torch import nn
 
+from .group_rows import decode_rows
 from .grouped import augmented_matrices, grouped_mlp, grouped_supported
 from .posenc import positional_encoding, posenc_dim
 
@@ -356,16 +357,17 @@ class NBWDecoder(nn.Module):
                      group_sorted: bool = False) -> torch.Tensor:
         """Evaluate each point only with its own (body, part) decoder.
 
-        Pairs are grouped by (body, part) and cut into equal chunks (:func:`group_pairs`), so every
-        layer is a single batched matmul over chunks. Equals ``decode_dense`` on the same pairs and
-        is differentiable w.r.t. ``x_local`` and (through ``gen``) the latent codes.
+        Pairs are grouped by (body, part) and cut into equal chunks (:func:`group_pairs`), so every layer is a
+        single batched matmul over chunks; without gradients on the CPU, each group's rows run through its own
+        weights instead, in cache tiles (volsmpl.nn.group_rows). Equals ``decode_dense`` on the same pairs and is
+        differentiable w.r.t. ``x_local`` and (through ``gen``) the latent codes.
 
         Args:
             x_local: (M, 3) points, each in the frame of its part.
             body_idx: (M,) int64 body index in [0, B).
             part_idx: (M,) int64 part index in [0, K).
             gen: weights from :meth:`generate`.
-            chunk: rows per matmul chunk; default :func:`default_chunk`.
+            chunk: rows per matmul chunk of the batched form; default :func:`default_chunk`.
             counts_host: pairs per (body, part) group (B * K ints, body-major) when the caller holds them on the
                 host already (the lean query counts them in its one sync): the indices are then taken as in
                 range and the call makes no host sync; without it, two (bounds, then the layout).
@@ -383,41 +385,39 @@ class NBWDecoder(nn.Module):
         if M == 0:
             out = x_local.sum(-1)
             return out if self.out_dim == 1 else out.unsqueeze(-1).expand(0, self.out_dim)
-        counts = group_counts(group, G)
+        counts = group_counts(group, G) if counts_host is None else None
         if counts_host is None:
-            counts_host = counts.tolist()  # the layout's host sync: chunk size and number of chunks from it
+            counts_host = counts.tolist()  # the layout's host sync: group sizes, chunk size and number of chunks
+        tile_rows = self.tile_rows(x_local.device)
+        needs_grad = torch.is_grad_enabled() and (x_local.requires_grad or any(
+            t.requires_grad for t in gen.weights + gen.biases))
+        if not needs_grad and tile_rows is not None:
+            # Inference on the CPU: each group's contiguous rows through its own weights, tile by tile (in cache)
+            order = None if group_sorted else torch.argsort(group, stable=True)
+            p = positional_encoding(x_local if order is None else x_local[order], self.pe_levels)
+            h = decode_rows(p, counts_host, [w.reshape(G, *w.shape[2:]) for w in gen.weights],
+                            [b.reshape(G, -1) for b in gen.biases], self.skip_layers, self.hidden, tile_rows)
+            if order is not None:
+                h = torch.empty_like(h).index_put_((order,), h)
+            return h.squeeze(-1) if self.out_dim == 1 else h
         if chunk is None:
             chunk = default_chunk(M, sum(c > 0 for c in counts_host))
         lay = group_pairs(group, G, int(chunk), counts, counts_host, group_sorted)
         n_chunks = lay.chunk_group.shape[0]
-
         xs = x_local[lay.src].view(n_chunks, lay.chunk, 3)
         Ws = [gen.weights[l].reshape(G, self.out_dims[l], self.pt_dims[l])[lay.chunk_group].transpose(1, 2)
               for l in range(self.n_layers)]                            # (n_chunks, in_pt, out)
         bs = [gen.biases[l].reshape(G, 1, self.out_dims[l])[lay.chunk_group] for l in range(self.n_layers)]
-        needs_grad = torch.is_grad_enabled() and (
-            x_local.requires_grad or any(w.requires_grad for w in Ws) or any(b.requires_grad for b in bs))
-        tile_rows = self.tile_rows(x_local.device)
-        if needs_grad or tile_rows is None:
-            h = self.mlp_chunks(xs, Ws, bs)
-        else:
-            # Inference on the CPU: run all layers tile by tile so activations stay in cache and buffers are reused.
-            tile = max(1, tile_rows // lay.chunk)
-            h = xs.new_empty(n_chunks, lay.chunk, self.out_dim)
-            for s in range(0, n_chunks, tile):
-                e = min(n_chunks, s + tile)
-                h[s:e] = self.mlp_chunks(xs[s:e], [W[s:e] for W in Ws], [b[s:e] for b in bs])
+        h = self.mlp_chunks(xs, Ws, bs)
         h = h.reshape(n_chunks * lay.chunk, self.out_dim)[lay.slot]
         return h.squeeze(-1) if self.out_dim == 1 else h
 
-    TILE_ROWS = 8192  # rows per cache tile on the no-grad path of decode_pairs (CPU)
+    TILE_ROWS = 4096  # rows per cache tile on the no-grad path of decode_pairs (CPU, volsmpl.nn.group_rows)
 
     def tile_rows(self, device) -> Optional[int]:
-        """Rows per cache tile of `decode_pairs` without gradients: TILE_ROWS on the CPU (activations stay in
-        cache), None on a GPU: every chunk in one batched matmul per layer, since a loop over tiles there only
-        multiplies the kernel launches (the operator calls of a query grew with B: 447 at B = 1, 2,586 at B = 8
-        on an H100 at 70cf9e6, docs/bench_cuda.md)."""
-        return self.TILE_ROWS if torch.device(device).type == "cpu" else None
+        """Rows per cache tile of `decode_pairs` without gradients: TILE_ROWS on the CPU (volsmpl.nn.group_rows),
+        None on a GPU: one batched matmul per layer, as loops over groups and tiles only multiply launches there."""
+        return self.TILE_ROWS if torch.device(device).type == "cpu" else None    # TILE_ROWS None: untiled too
 
     # ------------------------------------------------------------------ grouped decoding (volsmpl.nn.grouped)
     def grouped_supported(self, dtype: torch.dtype, device=None) -> bool:

@@ -83,6 +83,7 @@ class VolumetricSMPLNet(nn.Module):
         """FLOPs of one (point, part) decoder evaluation (the NBW decoder's)."""
         return self.decoder.flops_per_pair()
 
-    def set_tile_rows(self, rows: int) -> None:
-        """Rows per cache tile of the no-grad pair path (benchmarks of one-pass evaluation set it very large)."""
-        self.decoder.TILE_ROWS = int(rows)
+    def set_tile_rows(self, rows: int | None) -> None:
+        """Rows per cache tile of the no-grad pair path on the CPU; None: no tiles, the batched form of the GPU
+        (benchmarks of one-pass evaluation)."""
+        self.decoder.TILE_ROWS = None if rows is None else int(rows)
