@@ -29,6 +29,8 @@ A run measures:
     decoder work and FLOP rate (`bench_jobs.volume_job`). A (model, B) whose single call or memory,
     extrapolated linearly in B from the smaller batch, would exceed max_call_s or max_mem_fraction of the
     machine's memory is skipped with a note;
+  - per-body time of the largest batch B against B = 1 for 'volsmpl', measured interleaved in one process on the
+    same bodies (`volsmpl.bench_scaling`: the separate model rows drift with the machine between their runs);
   - `evaluate.measure_resources` (evaluate's protocol: validation body 0, batch 1, sparse volsmpl) as a
     cross-check of the volsmpl batch-1 row (`evaluate_protocol`); it reports the first call's memory;
   - the body-body occupancy check (paper Table B.4, `bench_bodybody`): the vertices of one posed default
@@ -59,7 +61,7 @@ from .provenance import machine_info
 __all__ = ["MODELS", "ENGINES", "PRECISIONS", "PAIR_DECODERS", "ONE_CHUNK", "EAGER_ENCODE", "GRAPH_QUERIES", "BenchConfig",
            "model_available",
            "checkpoint_for", "bench_model",
-           "bench_bodybody", "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
+           "bench_batch_scaling", "bench_bodybody", "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
            "add_parser", "config_from_args", "run", "PAPER", "compute_ratios", "format_report", "to_markdown"]
 
 #: benchmark model name -> (model given to attach_volume, dense query path)
@@ -103,6 +105,7 @@ class BenchConfig:
         checkpoints: model ('volsmpl' / 'coap') -> checkpoint path; missing: the registry's shipped checkpoint if present.
         seed: poses and points. init_seed: weights of untrained networks.
         accuracy: IoU/MSE on the validation set for trained checkpoints. n_bodies: validation bodies.
+        batch_scaling: measure 'volsmpl' per body at the largest batch against B = 1 interleaved (bench_scaling).
         bodybody: run the body-body check. bodybody_vertices: test only N evenly spread vertices of body A (None: all).
         winding_repeats: timed winding-number runs (each takes seconds on a CPU).
         matmul_size / matmul_repeats: the fp32 matmul used to measure the machine's FLOP rate.
@@ -129,6 +132,7 @@ class BenchConfig:
     init_seed: int = 0
     accuracy: bool = True
     n_bodies: int = 64
+    batch_scaling: bool = True
     bodybody: bool = True
     bodybody_vertices: Optional[int] = None
     winding_repeats: int = 2
@@ -227,6 +231,16 @@ def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optio
     r = run_job("volsmpl.bench_jobs:volume_job", job, inputs, cfg.timeout_s)
     r["weights"] = "trained" if checkpoint else "random init"
     return r
+
+
+def bench_batch_scaling(cfg: BenchConfig, body, checkpoint: Optional[str]) -> dict:
+    """'volsmpl' per body at the largest batch against B = 1, interleaved in one isolated process (bench_scaling)."""
+    B = max(cfg.batches)
+    job = {"spec": {"model": "volsmpl", "dense": False, "checkpoint": checkpoint, "init_seed": cfg.init_seed},
+           "device": cfg.device, "threads": cfg.threads or torch.get_num_threads(), "warmup": min(1, cfg.warmup),
+           "repeats": cfg.repeats}
+    return run_job("volsmpl.bench_scaling:batch_scaling_job", job, make_frames(body, B, cfg.n_points, 1, cfg.seed),
+                   cfg.timeout_s)
 
 
 def bench_bodybody(cfg: BenchConfig, body, checkpoint: Optional[str]) -> dict:
@@ -356,6 +370,9 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
             entry["batches"][str(batch)] = bench_model(name, batch, cfg, body, ckpts[base])
         result["models"][name] = entry
     if "volsmpl" in available and available["volsmpl"][0]:
+        if cfg.batch_scaling and "volsmpl" in cfg.models and max(cfg.batches) > 1:
+            log(f"volsmpl per body at B = {max(cfg.batches)} against B = 1, interleaved ...")
+            result["batch_scaling"] = bench_batch_scaling(cfg, body, ckpts["volsmpl"])
         if cfg.evaluate_check and "volsmpl" in cfg.models:
             log("evaluate.measure_resources cross-check ...")
             result["evaluate_protocol"] = evaluate_protocol_check(cfg, ckpts["volsmpl"])
@@ -400,6 +417,8 @@ def add_parser(sub):
     p.add_argument("--max-call", type=float, default=d.max_call_s,
                    help="skip a (model, batch) whose single query would take longer (seconds, extrapolated)")
     p.add_argument("--no-bodybody", action="store_true", help="skip the body-body winding-number check")
+    p.add_argument("--no-batch-scaling", action="store_true",
+                   help="skip the interleaved per-body timing of volsmpl at the largest batch against B = 1")
     p.add_argument("--quick", action="store_true", help="skip accuracy (IoU/MSE)")
     p.add_argument("--out", default=None, help="write the results as JSON here")
     p.add_argument("--markdown", default=None, help="write a Markdown report here")
@@ -413,6 +432,7 @@ def config_from_args(args) -> BenchConfig:
     return BenchConfig(models=models, batches=tuple(args.batch), n_points=args.points, repeats=args.repeats,
                        warmup=args.warmup, threads=args.threads, device=args.device, checkpoints=ckpts,
                        accuracy=not args.quick, n_bodies=args.n_bodies, bodybody=not args.no_bodybody,
+                       batch_scaling=not args.no_batch_scaling,
                        bodybody_vertices=args.bodybody_vertices, winding_repeats=args.winding_repeats,
                        matmul_size=args.matmul_size, budget_s=args.budget, max_call_s=args.max_call)
 

@@ -49,7 +49,7 @@ import torch
 from .meter import Meter, peak_memory, run_isolated, timed_ms
 
 __all__ = ["make_frames", "bodybody_inputs", "run_job", "volume_job", "winding_job", "build_volume",
-           "memory_first_and_steady", "fit_budget", "flops_per_pair", "derived", "matmul_rate", "profile_query",
+           "memory_first_and_steady", "fit_budget", "start_job", "flops_per_pair", "derived", "matmul_rate", "profile_query",
            "is_top_level_op"]
 
 
@@ -102,7 +102,7 @@ def run_job(target: str, job: dict, inputs: dict, timeout_s: float = 3600) -> di
     return res
 
 
-def _start(job: dict) -> Tuple[dict, dict]:
+def start_job(job: dict) -> Tuple[dict, dict]:
     """Common start of a job: torch threads, the input tensors, the result's device and threads."""
     torch.set_num_threads(int(job["threads"]))
     data = torch.load(job["inputs"])
@@ -230,7 +230,7 @@ def volume_job(job: dict) -> dict:
     from .body.model import create_body
     from .nn.nbw import count_parameters
 
-    data, res = _start(job)
+    data, res = start_job(job)
     device = torch.device(job["device"])
     body = create_body().to(device)
     vol = build_volume(body, job["spec"]).to(device)
@@ -279,7 +279,7 @@ def winding_job(job: dict) -> dict:
     float64): memory, time over job['repeats'] runs; the values saved to job['pred_path']."""
     from .groundtruth import winding_number
 
-    data, res = _start(job)
+    data, res = start_job(job)
     vb, faces, pts = data["vertices_b"], data["faces"], data["points"][0]
     holder = {}
     with torch.no_grad():

@@ -15,6 +15,7 @@ import os
 from typing import List, Optional, Tuple
 
 from . import paper
+from .bench_scaling import scaling_line, scaling_rows
 
 __all__ = ["PAPER", "RATIO_PAIRS", "compute_ratios", "caveats", "model_rows", "ratio_rows", "bodybody_rows",
            "text_table", "markdown_table", "summary_lines", "format_report", "to_markdown"]
@@ -176,6 +177,8 @@ def summary_lines(result: dict) -> List[str]:
     if ev:
         lines.append(f"evaluate.measure_resources (volsmpl, validation body 0, batch 1): t {ev['t_ms']:.1f} ms, "
                      f"t query {ev['t_query_ms']:.1f} ms, mem {_mem(ev['mem_bytes'])} ({ev['mem_method']})")
+    if result.get("batch_scaling"):
+        lines.append(scaling_line(result["batch_scaling"]))
     bb = result.get("bodybody")
     if bb:
         lines.append(f"body-body: {bb['vertices_tested']} vertices of body A vs body B ({bb['faces']} faces); "
@@ -186,6 +189,8 @@ def summary_lines(result: dict) -> List[str]:
 def format_report(result: dict) -> str:
     """Plain-text report: summary, model table, ratios, body-body table, notes."""
     parts = summary_lines(result) + ["", text_table(*model_rows(result)), "", text_table(*ratio_rows(result))]
+    if result.get("batch_scaling"):
+        parts += ["", text_table(*scaling_rows(result["batch_scaling"]))]
     if result.get("bodybody"):
         parts += ["", text_table(*bodybody_rows(result))]
     return "\n".join(parts + [""] + [f"note: {n}" for n in result["notes"]])
@@ -205,6 +210,12 @@ def to_markdown(result: dict) -> str:
             "t/body: t / B; ops/query: top-level operator calls of one query (torch.profiler); decoder GFLOP/s: decoder "
             "GFLOP / the time inside the decoder (profiled); decoder / matmul: that rate over the same run's fp32 matmul rate.", "", "## Ratios (same run) beside the paper's (GPU)", "",
             markdown_table(*ratio_rows(result))]
+    if result.get("batch_scaling"):
+        out += ["", "## Per-body time by batch size, interleaved in one process", "",
+                markdown_table(*scaling_rows(result["batch_scaling"])), "",
+                "The same bodies and points queried in alternating rounds as one batch and as one query per body "
+                "(each with its own encoding), medians per body (volsmpl.bench_scaling): the model rows above run "
+                "each batch size in its own process, minutes apart, and drift with the machine."]
     if result.get("bodybody"):
         out += ["", "## Body-body occupancy check (paper Table C.4)", "", markdown_table(*bodybody_rows(result))]
     out += ["", "## Notes", ""] + [f"- {n}" for n in result["notes"]]

@@ -218,3 +218,38 @@ def test_one_chunk_model_has_operator_calls_independent_of_batch():
     assert counts["volsmpl", 3] > counts["volsmpl", 1] > counts["volsmpl-onechunk", 1]
     for B in (1, 3):
         torch.testing.assert_close(values["volsmpl-onechunk", B], values["volsmpl", B], atol=1e-5, rtol=1e-5)
+
+
+def test_batch_scaling_job_times_the_same_bodies_both_ways(tmp_path):
+    """The interleaved per-body timing (volsmpl.bench_scaling): per-round lists for both ways, medians and ratios
+    derived from them, its table and summary line; a batch of one body is refused."""
+    import numpy as np
+    import torch
+
+    from volsmpl.bench_jobs import make_frames, run_job
+    from volsmpl.bench_report import to_markdown
+    from volsmpl.bench_scaling import batch_scaling_job, scaling_line, scaling_rows
+
+    body = volsmpl.create_body()
+    job = {"spec": {"model": "volsmpl", "dense": False, "checkpoint": None, "init_seed": 0}, "device": "cpu",
+           "threads": 1, "warmup": 1, "repeats": 3}
+    s = run_job("volsmpl.bench_scaling:batch_scaling_job", job, make_frames(body, 2, 1500, 1, 0))
+    assert s["batch"] == 2 and s["points"] == 1500 and s["rounds"] == 3
+    for key in ("t_body_ms", "t_query_body_ms"):
+        assert set(s[key]) == {"1", "2"} and all(len(v) == 3 for v in s[key + "_all"].values())
+        for b in ("1", "2"):
+            assert s[key][b] == pytest.approx(np.median(s[key + "_all"][b])) and s[key][b] > 0
+    assert s["ratio_query"] == pytest.approx(s["t_query_body_ms"]["2"] / s["t_query_body_ms"]["1"])
+    assert s["ratio_t"] == pytest.approx(s["t_body_ms"]["2"] / s["t_body_ms"]["1"])
+    head, rows = scaling_rows(s)
+    assert head[2] == "B = 2 (one batch)" and len(rows) == 2 and "B = 2 against B = 1" in scaling_line(s)
+    one = tmp_path / "one.pt"
+    torch.save(make_frames(body, 1, 100, 1, 0), one)
+    with pytest.raises(ValueError, match="at least 2 bodies"):
+        batch_scaling_job(dict(job, inputs=str(one)))
+    res = {"meta": {"cpu": "x", "cpu_count": 2, "load_avg_1_5_15": [0, 0, 0], "device": "cpu", "threads": 1,
+                    "torch": "t", "python": "p", "date": "d", "git_commit": "c"},
+           "matmul": {"size": 8, "t_ms": 1.0, "gflops": 1.0, "t_ms_all": [1.0]},
+           "config": {"batches": [1, 2], "n_points": 1500, "repeats": 3, "warmup": 1, "device": "cpu"},
+           "models": {}, "ratios": {}, "notes": [], "batch_scaling": s}
+    assert "## Per-body time by batch size, interleaved in one process" in to_markdown(res)
