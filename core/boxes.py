@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import torch
 
-from .nn.analytic import box_excess
 
 
 def inside_boxes(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor) -> torch.Tensor:
@@ -33,13 +32,14 @@ def box_centred(points: torch.Tensor, G: torch.Tensor, box_min: torch.Tensor, bo
 
 @torch.no_grad()
 def box_test(points: torch.Tensor, G: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor):
-    """Every point in every part's box-centred frame and its excess over the box, without autograd.
+    """Every point in every part's box-centred frame and its largest excess over the box, without autograd.
 
-    Shape: points (B, N, 3), G (B, K, 4, 4), box_min/max (B, K, 3) -> u (B, N, K, 3) (box_centred), q (B, N, K, 3)
-    and q_max (B, N, K) (nn.analytic.box_excess: the point is in the box where q_max <= 0; NaN points in none).
-    Use with parts_holding."""
+    Shape: points (B, N, 3), G (B, K, 4, 4), box_min/max (B, K, 3) -> u (B, N, K, 3) (box_centred) and q_max
+    (B, N, K), the maximum over the axes of nn.analytic.box_excess's q = |u| - half (the point is in the box where
+    q_max <= 0; NaN points in none). The per-axis excess is not kept (a pass over 4 x 3 floats per (point, part)):
+    callers form it for the points that need it. Use with parts_holding."""
     u, half = box_centred(points, G, box_min, box_max)
-    return (u, *box_excess(u, half[:, None]))
+    return u, u.abs().sub_(half[:, None]).amax(dim=-1)
 
 
 def parts_holding(q_max: torch.Tensor) -> torch.Tensor:

@@ -144,7 +144,7 @@ class EncodingCache:
         B, N = points.shape[:2]
         G, box_min, box_max = G.detach(), box_min.detach(), box_max.detach()
         for b0, b1, s, e in self._lean_chunks(B, N, G.device):
-            need |= parts_holding(box_test(points[b0:b1, s:e].detach(), G[b0:b1], box_min[b0:b1], box_max[b0:b1])[2])
+            need |= parts_holding(box_test(points[b0:b1, s:e].detach(), G[b0:b1], box_min[b0:b1], box_max[b0:b1])[1])
         return need
 
     def _cached(self, out, key: tuple | None = None) -> Encoding | None:

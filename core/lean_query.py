@@ -25,7 +25,7 @@ class LeanQuery:
     `gpu_chunk_elems`, `decoder_evaluations`, `_decode_xin` and `_encoding_for` (EncodingCache)."""
 
     def _lean_encoding(self, out, points: torch.Tensor, frames=None):
-        """`_encoding_for(out, points, frames)` and a holder {'test': (G, u, q, q_max)} of the box test it made of
+        """`_encoding_for(out, points, frames)` and a holder {'test': (G, u, q_max)} of the box test it made of
         `points` to choose the parts to encode, when the lean query of these points is one chunk (so that the
         query reuses it instead of testing the same points again); the holder is empty otherwise, or when a cached
         full encoding needed no test."""
@@ -35,7 +35,7 @@ class LeanQuery:
             def holding(G, box_min, box_max):
                 test = box_test(points, G, box_min, box_max)
                 pending["test"] = (G, *test)
-                return parts_holding(test[2])
+                return parts_holding(test[1])
         return self._encoding_for(out, points, frames, holding), pending
 
     def _query_lean(self, enc: Encoding, points: torch.Tensor, b0: int = 0, outside: bool = True,
@@ -63,14 +63,14 @@ class LeanQuery:
         half = 0.5 * (box_max - box_min)
         test = pending.pop("test", None) if pending else None
         if test is not None and test[0] is enc.G and b0 == 0 and test[1].shape[:2] == (B, N):
-            u, q, q_max = test[1:]                                            # made by `_lean_encoding`
+            u, q_max = test[1:]                                               # made by `_lean_encoding`
         else:
-            u, q, q_max = box_test(points, G, box_min, box_max)
+            u, q_max = box_test(points, G, box_min, box_max)
         del test
         raw = q_max <= 0                                                      # (B, N, K) point in box k
         grad = torch.is_grad_enabled() and any(x.requires_grad for x in (points, G, box_min, box_max))
         if grad:
-            del u, q, q_max  # formed again below for the pairs and the box-free points only, with autograd
+            del u, q_max  # formed again below for the pairs and the box-free points only, with autograd
         inside = raw if enc.slot is None else raw & enc.encoded(K)
         free = ~inside.any(dim=-1)                                            # (B, N)
         n_free_t = free.sum() if outside else torch.zeros((), dtype=torch.long, device=free.device)
@@ -100,13 +100,13 @@ class LeanQuery:
                                 for i in range(B)])                           # (F, K, 3), bf is sorted
                 qf, qf_max = box_excess(uf, half[bf])
             else:
-                qf, qf_max = q[bf, nf], q_max[bf, nf]
+                qf, qf_max = u[bf, nf].abs().sub_(half[bf]), q_max[bf, nf]
             # a part without a code is absent inside its box (as in _part_values)
             d = outside_distance(qf, qf_max, None if enc.slot is None else raw[bf, nf])   # (F,)
             res = res.index_put((bf * N + nf,), d)
             del qf, qf_max, d
         if not grad:
-            del u, q, q_max  # before the decoders: their activations are the query's other large buffers
+            del u, q_max  # before the decoders: their activations are the query's other large buffers
         if n_pairs:
             if enc.scale is not None:
                 sc = enc.scale[b0:b0 + B][b, k]

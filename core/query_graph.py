@@ -56,7 +56,7 @@ def static_lean_query(decoder, G: torch.Tensor, box_min: torch.Tensor, box_max: 
     B, N = points.shape[:2]
     K = G.shape[1]
     groups = B * K + 1                                                    # the last: unused rows of the capacity
-    u, q, q_max = box_test(points, G, box_min, box_max)                   # (B, N, K, 3), (B, N, K, 3), (B, N, K)
+    u, q_max = box_test(points, G, box_min, box_max)                      # (B, N, K, 3), (B, N, K)
     inside = q_max <= 0
     by_part = inside.transpose(1, 2).contiguous()                         # (B, K, N): pairs sorted by (body, part)
     pairs = by_part.sum()
@@ -82,6 +82,7 @@ def static_lean_query(decoder, G: torch.Tensor, box_min: torch.Tensor, box_max: 
     target = torch.where(used, b * N + n, B * N)                          # unused rows: a discarded last slot
     best = points.new_full((B * N + 1,), math.inf).scatter_reduce(0, target, h, "amin")[:-1].view(B, N)
     free = ~inside.any(dim=-1)
+    q = u.abs() - 0.5 * (box_max - box_min)[:, None]                      # (B, N, K, 3) excess over each box
     box = outside_distance(q.reshape(B * N, K, 3), q_max.reshape(B * N, K)).view(B, N)
     values = torch.where(free, box, best)
     nonfinite = (~torch.isfinite(points)).any(dim=-1).sum()
