@@ -154,7 +154,7 @@ MUTANTS = {
                                        [T + "test_nn_nbw.py::test_decode_rows_cpu_path_equals_naive_per_point_decoder"]),
     "group_rows_unsorted_left_sorted": ("core/nn/nbw.py", "h = torch.empty_like(h).index_put_((order,), h)", "pass",
                                         [T + "test_nn_nbw.py::test_decode_rows_cpu_path_equals_naive_per_point_decoder"]),
-    "group_rows_skip_reads_h_only": ("core/nn/group_rows.py", ".addmm_(pe, Wt[l][hidden:])", ".add_(0)",
+    "group_rows_skip_reads_h_only": ("core/nn/group_rows.py", "h = h.addmm_(pe, Wp[l][i])", "h = h",
                                      [T + "test_nn_nbw.py::test_decode_rows_cpu_path_equals_naive_per_point_decoder"]),
 }
 

@@ -34,12 +34,18 @@ def decode_rows(p: torch.Tensor, counts: Sequence[int], weights: Sequence[torch.
         raise ValueError(f"decode_rows: tile must be >= 1 row, got {tile}")
     n_layers = len(weights)
     out = p.new_empty(p.shape[0], weights[-1].shape[1])
+    # the (in, out) weights and biases of the groups with rows, as views made by one unbind per layer
+    live = [g for g, n in enumerate(counts) if n]
+    pick = None if len(live) == len(counts) else torch.tensor(live, device=p.device)
+    Wt, Wp, bias = [], [], []
+    for l, W in enumerate(weights):
+        W = (W if pick is None else W[pick]).transpose(1, 2)            # (G', in, out)
+        skip = l in skip_layers
+        Wt.append((W[:, :hidden] if skip else W).unbind(0))
+        Wp.append(W[:, hidden:].unbind(0) if skip else None)
+        bias.append((biases[l] if pick is None else biases[l][pick]).unbind(0))
     start = 0
-    for g, n in enumerate(counts):
-        if n == 0:
-            continue
-        Wt = [W[g].t() for W in weights]                                # (in, out) views
-        b = [bl[g] for bl in biases]
+    for i, n in enumerate(counts[g] for g in live):
         for s in range(start, start + n, tile):
             e = min(start + n, s + tile)
             pe = p[s:e]
@@ -47,10 +53,9 @@ def decode_rows(p: torch.Tensor, counts: Sequence[int], weights: Sequence[torch.
             for l in range(n_layers):
                 last = l == n_layers - 1
                 into = {"out": out[s:e]} if last else {}
-                if l in skip_layers:
-                    h = torch.addmm(b[l], h, Wt[l][:hidden], **into).addmm_(pe, Wt[l][hidden:])
-                else:
-                    h = torch.addmm(b[l], h, Wt[l], **into)
+                h = torch.addmm(bias[l][i], h, Wt[l][i], **into)
+                if Wp[l] is not None:
+                    h = h.addmm_(pe, Wp[l][i])
                 if not last:
                     h = h.relu_()
         start += n
