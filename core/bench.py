@@ -16,7 +16,7 @@ on every point, i.e. dense), 'coap-sparse' (COAP's network on the sparse engine)
 'volsmpl-tf32' (the sparse engine in a reduced precision, `PRECISIONS`, `Volume.set_precision`; tf32 on CUDA only;
 their accuracy columns are measured in that precision), 'volsmpl-tiles' / 'volsmpl-grouped' (the sparse engine
 with that pair decoder, `PAIR_DECODERS`, `Volume.pair_decoder`, whichever the default is), 'volsmpl-onechunk'
-(the lean path with the whole batch in one chunk and untiled decoders, `ONE_CHUNK`: its operator calls do not
+(the lean path with the whole batch in one chunk and the decoders' batched one-pass form, `ONE_CHUNK`: its operator calls do not
 depend on B; the default 'volsmpl' keeps cache-sized chunks on the CPU, one body per chunk at 60k points),
 'volsmpl-eager' (the no-grad encode run op by op, `EAGER_ENCODE`: `Volume.cuda_graphs` off; the default 'volsmpl'
 replays it from a CUDA graph on a GPU; on a CPU the two are the same) and 'volsmpl-qgraph' (the no-grad lean query
@@ -73,7 +73,7 @@ MODELS: Dict[str, Tuple[str, bool]] = {
     "volsmpl-chunked": ("volsmpl", False),  # the sparse engine before issue 28: padded chunks, dense box distances
     "volsmpl-bf16": ("volsmpl", False),     # the sparse engine with bfloat16 decoder layers (Volume.set_precision)
     "volsmpl-tf32": ("volsmpl", False),     # the sparse engine with TF32 matmuls (CUDA only)
-    "volsmpl-onechunk": ("volsmpl", False),  # the lean path in one chunk per query, decoders untiled
+    "volsmpl-onechunk": ("volsmpl", False),  # the lean path in one chunk per query, decoders in one batched pass
     "volsmpl-tiles": ("volsmpl", False),     # the sparse engine with the tiled pair decoder (Volume.pair_decoder)
     "volsmpl-grouped": ("volsmpl", False),   # the sparse engine with one grouped matmul per decoder layer
     "volsmpl-eager": ("volsmpl", False),     # the no-grad encode op by op (Volume.cuda_graphs off)

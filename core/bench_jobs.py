@@ -195,7 +195,7 @@ def is_top_level_op(event) -> bool:
 def build_volume(body, spec: dict):
     """The volume a job measures: spec {'model', 'dense', 'checkpoint' (or None: random init), 'init_seed',
     optional 'engine' (Volume.engine, default 'lean'), optional 'precision' (Volume.set_precision, default 'full'),
-    optional 'one_chunk' (True: every query in one chunk, decoders untiled), optional 'pair_decoder'
+    optional 'one_chunk' (True: every query in one chunk, decoders in their batched one-pass form), optional 'pair_decoder'
     (Volume.pair_decoder; None: the Volume's default), optional 'cuda_graphs' (Volume.cuda_graphs), 'cuda_graph_queries'
     (Volume.cuda_graph_queries)}."""
     from .attach import attach_volume

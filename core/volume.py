@@ -55,9 +55,10 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
             inside, takes their minimum by one scatter and computes box distances only for the points in no box,
             with one host sync) or 'chunked' (the engine before issue 28: every part's box distance at every
             point, then the minimum over a dense (B, K, N) array).
-        pair_decoder: how the pairs are decoded: 'tiles' (default: pairs sorted by (body, part) group and cut
-            into equal chunks, only each group's last chunk padded (~9 % of the rows on the benchmark's points),
-            one batched matmul per layer per cache tile of 8,192 rows: NBWDecoder.decode_pairs) or 'grouped'
+        pair_decoder: how the pairs are decoded: 'tiles' (default, NBWDecoder.decode_pairs: without gradients on
+            the CPU each (body, part) group's rows through its own weights, one addmm per layer and cache tile of
+            4,096 rows, volsmpl.nn.group_rows; otherwise pairs cut into equal chunks of one group each, only each
+            group's last chunk padded (~9 % of the rows on the benchmark's points), one batched matmul per layer) or 'grouped'
             (one grouped matmul per layer over all pairs, no padding, no tiles: the operator count does not
             depend on B or on the pairs, volsmpl.nn.grouped; on the project's AMD EPYC 1.3-2.5x slower than
             'tiles', as its activations leave the cache; on its Intel Xeon at 60k points, 2026-11-26: 0.85x the

@@ -417,7 +417,7 @@ class NBWDecoder(nn.Module):
     def tile_rows(self, device) -> Optional[int]:
         """Rows per cache tile of `decode_pairs` without gradients: TILE_ROWS on the CPU (volsmpl.nn.group_rows),
         None on a GPU: one batched matmul per layer, as loops over groups and tiles only multiply launches there."""
-        return self.TILE_ROWS if torch.device(device).type == "cpu" else None    # TILE_ROWS None: untiled too
+        return self.TILE_ROWS if torch.device(device).type == "cpu" else None    # TILE_ROWS None: batched too
 
     # ------------------------------------------------------------------ grouped decoding (volsmpl.nn.grouped)
     def grouped_supported(self, dtype: torch.dtype, device=None) -> bool:
