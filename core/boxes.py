@@ -5,7 +5,6 @@ from __future__ import annotations
 import torch
 
 
-
 def inside_boxes(x_local: torch.Tensor, box_min: torch.Tensor, box_max: torch.Tensor) -> torch.Tensor:
     """x_local (B, K, N, 3) in part frames, box_min/max (B, K, 3) -> (B, K, N) bool (closed boxes)."""
     return ((x_local >= box_min[:, :, None]) & (x_local <= box_max[:, :, None])).all(dim=-1)

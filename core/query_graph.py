@@ -9,7 +9,7 @@ depend on the data (the (point, part) pairs inside boxes, the points in no box),
   - the pairs are the first `capacity` (body, part, point) entries inside boxes (`torch.nonzero_static`, sorted by
     (body, part)); the unused rows go to an extra, empty group whose results land in a discarded slot;
   - the decoder runs on the group-contiguous layout of `chunk`-row chunks of `NBWDecoder.decode_pairs`
-    (`nn.nbw.group_pairs`, each group's last chunk padded) with a fixed number of chunks, capacity / chunk + groups,
+    (`nn.pairs.group_pairs`, each group's last chunk padded) with a fixed number of chunks, capacity / chunk + groups,
     enough for any split of the pairs;
   - every point gets its box distance (the eager path computes it only for the points in no box) and the points in
     some box take the minimum of their parts' decoders instead.
@@ -35,7 +35,7 @@ import torch
 from .boxes import box_test
 from .encode_graph import GraphStore, settings_key
 from .nn.analytic import outside_distance
-from .nn.nbw import group_pairs
+from .nn.pairs import group_pairs
 
 #: rows per chunk of the static decoder layout (one group's rows; its last chunk padded)
 STATIC_CHUNK = 256

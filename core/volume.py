@@ -28,7 +28,7 @@ from .encoding import Encoding, EncodingCache
 from .lean_query import DECODER_SCOPE, LeanQuery
 from .models import kind_of_network, model_kind
 from .nn.analytic import box_sdf
-from .nn.nbw import group_counts
+from .nn.pairs import group_counts
 from .nn.volsmpl_net import PartCode
 from .partition import Partition
 from .precision import check_precision, matmul_precision

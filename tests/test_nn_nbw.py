@@ -3,7 +3,8 @@ import torch
 
 from volsmpl.nn.config import VolumeConfig
 from volsmpl.nn.grouped import grouped_supported
-from volsmpl.nn.nbw import NBWDecoder, count_parameters, group_pairs
+from volsmpl.nn.nbw import NBWDecoder, count_parameters
+from volsmpl.nn.pairs import group_pairs
 from volsmpl.nn.pointnet import ResnetPointNet
 from volsmpl.nn.posenc import positional_encoding
 
@@ -319,7 +320,7 @@ def test_decode_grouped_refuses_bad_input():
 
 def test_group_counts_and_a_layout_from_host_counts():
     """group_counts equals bincount; a layout made from counts the caller fetched equals the one made alone."""
-    from volsmpl.nn.nbw import group_counts
+    from volsmpl.nn.pairs import group_counts
     g = torch.randint(0, 7, (500,), generator=torch.Generator().manual_seed(1))
     g[g == 3] = 5                                                   # an empty group
     c = group_counts(g, 9)

@@ -139,7 +139,7 @@ MUTANTS = {
                                    [T + "test_groundtruth.py::test_mesh_query_batch_against_brute_force"]),
     "static_query_skips_box_distances": ("core/query_graph.py", "values = torch.where(free, box, best)", "values = best",
                                          [T + "test_query_graph.py::test_static_query_equals_the_eager_query"]),
-    "static_layout_chunk_groups_shifted": ("core/nn/nbw.py", "torch.arange(total, device=dev), right=True)",
+    "static_layout_chunk_groups_shifted": ("core/nn/pairs.py", "torch.arange(total, device=dev), right=True)",
                                            "torch.arange(total, device=dev), right=False)",
                                            [T + "test_query_graph.py::test_static_query_equals_the_eager_query"]),
     "query_graph_ignores_overflow": ("core/query_graph.py", "        if pairs > cap:", "        if False:",

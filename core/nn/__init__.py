@@ -1,7 +1,8 @@
 """Neural building blocks of VolumetricSMPL: encoder, positional encoding, NBW decoder, box SDF."""
 from .analytic import box_sdf, transform_points, union_box_sdf
 from .config import VolumeConfig
-from .nbw import NBWDecoder, NBWWeights, PairLayout, count_parameters, default_chunk, group_pairs
+from .nbw import NBWDecoder, NBWWeights, count_parameters
+from .pairs import PairLayout, default_chunk, group_pairs
 from .pointnet import ResnetBlockFC, ResnetPointNet
 from .posenc import PositionalEncoding, positional_encoding, posenc_dim
 

@@ -48,7 +48,8 @@ from torch import nn
 from torch.nn import functional as F
 
 from .config import JsonConfig
-from .nbw import check_code_parts, check_pairs, check_part_subset, count_parameters
+from .nbw import check_code_parts, check_part_subset, count_parameters
+from .pairs import check_pairs
 from .pointnet import ResnetPointNet
 
 _INV_SQRT2 = 1.0 / math.sqrt(2.0)

@@ -6,7 +6,7 @@ group's own (out, in) weight read in place as a transposed view: no padded chunk
 weights, no gathers of the points or scatters of the results. On the project's 2-core CPU, on the 44.5k pairs (16
 groups) of one 60k-point query and 1 thread, this ran 1.4-1.6x faster than the padded batched matmul of
 `NBWDecoder.mlp_chunks` (2026-11-27; whole queries gain less: README, "Benchmark").
-The loop costs about 15 operator calls per group and tile, which a GPU would pay as launches: there
+The loop costs about 16 operator calls per group and tile, which a GPU would pay as launches: there
 `decode_pairs` keeps the batched form.
 
     h = decode_rows(p, counts, weights, biases, skip_layers=(3,), hidden=64, tile=4096)   # (M, out_dim)
