@@ -228,8 +228,9 @@ class Partition(torch.nn.Module):
         dev = generator.device if generator is not None else vertices.device
         n_t = self.n_samples // 2
         out_f = []
+        face_areas = triangle_areas(vertices.detach(), self.faces)  # (B, F): once per face, then gathered per part
         for pad, mask, n in ((self._tight_pad, self._tight_mask, n_t), (self._ext_pad, self._ext_mask, self.n_samples - n_t)):
-            areas = triangle_areas(vertices.detach(), self.faces[pad])  # (B, K, L)
+            areas = face_areas[:, pad]  # (B, K, L)
             areas = torch.where(mask, areas, torch.zeros_like(areas)).clamp_min(0)
             probs = areas.reshape(B * self.num_parts, -1).to(dev, torch.float64)
             idx = torch.multinomial(probs, n, replacement=True, generator=generator)

@@ -26,6 +26,7 @@ def _reference(vol, tiny_config, out, points):
     """A fresh volume with vol's current weights (no cache), on copies of the output's tensors."""
     ref = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=tiny_config).eval()
     ref.load_state_dict(vol.state_dict())
+    ref.net.encoder_bf16 = vol.net.encoder_bf16
     mine = dict(vol.named_buffers())
     with torch.no_grad():
         for name, buf in ref.named_buffers():  # the partition's buffers are not in the state dict
@@ -121,6 +122,26 @@ def test_weight_edits_invalidate(tiny_config, how):
     assert not torch.allclose(expect, before, atol=1e-4)
     assert torch.allclose(same_object, expect, atol=1e-6)
     assert torch.allclose(equal_new_output, expect, atol=1e-6)
+
+
+def test_encoder_arithmetic_switch_re_encodes(tiny_config):
+    """Switching the encoder to bfloat16 (`net.encoder_bf16`, as training runs it) and back changes the codes
+    without changing a tensor: the cache must not serve the codes made the other way (it did before 2026-11-27),
+    neither on the same output nor on an equal new one."""
+    torch.manual_seed(7)
+    b = volsmpl.create_body()
+    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).eval()
+    p = random_pose(1, seed=26)
+    with torch.no_grad():
+        out = b(**p)
+        pts = _points(out, 2000)
+        full = vol.query(out, pts)
+        for bf16 in (True, False):
+            vol.net.encoder_bf16 = bf16
+            same_object, equal_new_output = vol.query(out, pts), vol.query(b(**p), pts)
+            expect = _reference(vol, tiny_config, out, pts)
+            assert torch.equal(same_object, expect) and torch.equal(equal_new_output, expect)
+            assert bf16 == (not torch.equal(expect, full))   # bfloat16 codes do change the field
 
 
 def test_selfpen_and_parts_follow_edits(setup, tiny_config):

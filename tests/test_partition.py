@@ -114,6 +114,24 @@ def test_area_weighting(body, part):
         assert abs(counts[faces][chunk].sum() - expected[chunk].sum()) < 0.15 * expected[chunk].sum() + 30
 
 
+def test_draws_weigh_each_part_list_by_its_face_areas(body, part):
+    """`_draw` (areas once per face, gathered per part) draws what the literal definition draws: an
+    area-weighted choice over each part's own padded face list (tight, then extended), with the same generator."""
+    out = body(**random_pose(2, seed=5))
+    f_ids, _ = part._draw(out.vertices, torch.Generator().manual_seed(11))
+    g = torch.Generator().manual_seed(11)
+    v = out.vertices.detach()
+    expect = []
+    for pad, mask, n in ((part._tight_pad, part._tight_mask, part.n_samples // 2),
+                         (part._ext_pad, part._ext_mask, part.n_samples - part.n_samples // 2)):
+        tri = v[:, part.faces[pad]]                                          # (B, K, L, 3, 3)
+        areas = 0.5 * torch.linalg.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :]).norm(dim=-1)
+        probs = torch.where(mask, areas, torch.zeros_like(areas)).clamp_min(0).reshape(-1, pad.shape[1]).double()
+        idx = torch.multinomial(probs, n, replacement=True, generator=g)
+        expect.append(torch.gather(pad.repeat(2, 1), 1, idx).reshape(2, part.num_parts, n))
+    assert torch.equal(f_ids, torch.cat(expect, dim=-1))
+
+
 def test_batch_equals_items(body, part):
     p = random_pose(3, seed=8)
     out = body(**p)
