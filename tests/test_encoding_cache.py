@@ -36,6 +36,13 @@ def _reference(vol, tiny_config, out, points):
         return ref.query(copy, points)
 
 
+def _fresh_volume(tiny_config, seed):
+    """A new body and an untrained volume on it, its weights drawn after torch.manual_seed(seed)."""
+    torch.manual_seed(seed)
+    b = volsmpl.create_body()
+    return b, volsmpl.attach_volume(b, pretrained=False, config=tiny_config).eval()
+
+
 def _points(out, n=300, seed=0):
     g = torch.Generator().manual_seed(seed)
     v = out.vertices.detach()
@@ -91,9 +98,7 @@ def test_edited_output_with_gradients(setup, tiny_config):
 
 @pytest.mark.parametrize("how", ["data", "numpy", "no_grad_inplace", "load_state_dict", "buffer"])
 def test_weight_edits_invalidate(tiny_config, how):
-    torch.manual_seed(4)
-    b = volsmpl.create_body()
-    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).eval()
+    b, vol = _fresh_volume(tiny_config, 4)
     p = random_pose(1, seed=23)
     with torch.no_grad():
         out = b(**p)
@@ -128,9 +133,7 @@ def test_encoder_arithmetic_switch_re_encodes(tiny_config):
     """Switching the encoder to bfloat16 (`net.encoder_bf16`, as training runs it) and back changes the codes
     without changing a tensor: the cache must not serve the codes made the other way (it did before 2026-11-27),
     neither on the same output nor on an equal new one."""
-    torch.manual_seed(7)
-    b = volsmpl.create_body()
-    vol = volsmpl.attach_volume(b, pretrained=False, config=tiny_config).eval()
+    b, vol = _fresh_volume(tiny_config, 7)
     p = random_pose(1, seed=26)
     with torch.no_grad():
         out = b(**p)
