@@ -17,6 +17,8 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from .partition import triangle_areas
+
 #: default near-surface noise (metres): half of the near-surface queries get 1 cm, half 5 cm (see sampler docstring)
 DEFAULT_SURFACE_SIGMA = (0.01, 0.05)
 
@@ -33,11 +35,6 @@ def _gaussian_offsets(split: list[tuple[float, int]], lead: tuple, generator, f6
     """(*lead, n, 3) isotropic offsets, the i-th run of split's counts m_i with standard deviation s_i."""
     scale = torch.cat([torch.full((m,), s, **f64) for s, m in split])
     return torch.randn(*lead, len(scale), 3, generator=generator, **f64) * scale[:, None]
-
-
-def _triangle_areas(tri: torch.Tensor) -> torch.Tensor:
-    """tri (..., 3, 3) -> areas (...)."""
-    return 0.5 * torch.linalg.cross(tri[..., 1, :] - tri[..., 0, :], tri[..., 2, :] - tri[..., 0, :], dim=-1).norm(dim=-1)
 
 
 def sample_surface(vertices: torch.Tensor, faces: torch.Tensor, n: int, face_ids_per_part=None,
@@ -77,7 +74,7 @@ def sample_surface(vertices: torch.Tensor, faces: torch.Tensor, n: int, face_ids
         pad[k, : len(ids)] = torch.as_tensor(ids)
         mask[k, : len(ids)] = True
     pad, mask = pad.to(dev), mask.to(dev)
-    areas = _triangle_areas(vv[:, ff])  # (B, F): once per body, then gathered per part
+    areas = triangle_areas(vv, ff)  # (B, F): once per body, then gathered per part
     part_areas = torch.where(mask, areas[:, pad], torch.zeros((), dtype=vv.dtype, device=dev))  # (B, K, L)
     rows = part_areas.reshape(B * K, -1)
     if (rows.sum(-1) <= 0).any():
