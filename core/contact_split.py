@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from .body.poses import BODY_JOINTS, JOINT_LIMITS, NAMED_POSES, euler_to_body_pose
-from .validation import SHAPE_GROUPS
+from .validation import SHAPE_GROUPS, sub_seed
 
 __all__ = ["CONTACT_SEED", "SELF_CONTACT_POSES", "N_CONTACT_BODIES", "self_contact_labels", "self_contact_bodies",
            "evaluate_self_contact"]
@@ -58,15 +58,11 @@ SELF_CONTACT_POSES = {
 _JITTER = 0.05  # rad, sd of the jitter of the second copy of each pose
 
 
-def _sub_seed(*words: int) -> int:
-    return int(np.random.SeedSequence([int(w) for w in words]).generate_state(1)[0])
-
-
 def _spec(i: int, seed: int) -> dict:
     names = list(SELF_CONTACT_POSES)
     P = len(names)
     return {"pose": names[i % P], "jitter": i >= P, "shape": list(SHAPE_GROUPS)[(i + i // P) % len(SHAPE_GROUPS)],
-            "seed": _sub_seed(seed, i)}
+            "seed": sub_seed(seed, i)}
 
 
 def self_contact_labels(n: int = 16, seed: int = CONTACT_SEED) -> List[str]:
@@ -102,9 +98,9 @@ def self_contact_bodies(n: int = 16, seed: int = CONTACT_SEED, num_betas: int = 
     for i in range(n):
         spec = _spec(i, seed)
         s = spec["seed"]
-        pose.append(euler_to_body_pose(_euler(spec["pose"], np.random.default_rng(_sub_seed(s, 0)) if spec["jitter"] else None)))
-        betas.append(sample_betas(1, num_betas=num_betas, seed=_sub_seed(s, 1), **SHAPE_GROUPS[spec["shape"]]))
-        rng = np.random.default_rng(_sub_seed(s, 2))
+        pose.append(euler_to_body_pose(_euler(spec["pose"], np.random.default_rng(sub_seed(s, 0)) if spec["jitter"] else None)))
+        betas.append(sample_betas(1, num_betas=num_betas, seed=sub_seed(s, 1), **SHAPE_GROUPS[spec["shape"]]))
+        rng = np.random.default_rng(sub_seed(s, 2))
         orient.append(Rotation.random(1, random_state=rng).as_rotvec())
         transl.append(rng.uniform(-0.5, 0.5, size=(1, 3)))
     f32 = dict(dtype=torch.float32)

@@ -59,6 +59,9 @@ def _paper_table1() -> dict:
     return out
 
 
+#: where `evaluate` puts the query points (EvalConfig.sampling)
+SAMPLINGS = ("body", "parts")
+
 #: the paper's Table 1 (fractions for IoU, m^2 for MSE, GPU memory in GB, time in ms), for reference
 PAPER_TABLE1 = _paper_table1()
 
@@ -81,6 +84,10 @@ class EvalConfig:
             with other processes busy, OpenMP threads waiting for each other can slow a CPU query 100x.
         precision: the volume's decoder arithmetic during the evaluation ('full', 'bf16', 'tf32';
             `Volume.set_precision`), for the accuracy cost of a reduced-precision mode.
+        sampling: where the points lie: 'body' (uniform in the body's padded bounding box, near-surface samples
+            on the whole mesh: `validation.query_points`) or 'parts' (COAP's per-part sampling: the same number
+            of points per body part, uniform in its padded box and near its own faces: `part_points`;
+            bbox_padding does not apply, the boxes are the models' 12.5 %).
     """
 
     n_bodies: int = 64
@@ -100,6 +107,7 @@ class EvalConfig:
     timing_warmup: int = 3
     timing_threads: Optional[int] = None
     precision: str = "full"
+    sampling: str = "body"
 
     def __post_init__(self):
         for name in ("n_bodies", "n_points", "batch_size", "timing_repeats"):
@@ -115,6 +123,8 @@ class EvalConfig:
         if not (self.bbox_padding >= 0 and self.surface_sigma >= 0):
             raise ValueError(f"EvalConfig.bbox_padding={self.bbox_padding} and surface_sigma={self.surface_sigma} "
                              f"must be >= 0 (metres).")
+        if self.sampling not in SAMPLINGS:
+            raise ValueError(f"EvalConfig.sampling={self.sampling!r}: use one of {', '.join(SAMPLINGS)}.")
         if self.device not in ("cpu", "cuda") and not str(self.device).startswith("cuda:"):
             raise ValueError(f"EvalConfig.device={self.device!r}: use 'cpu' or 'cuda'.")
         if self.precision not in PRECISIONS:
@@ -177,8 +187,13 @@ def evaluate(predict_fn: Callable, bodies: Optional[Dict[str, torch.Tensor]] = N
     body = body.to(device)
     with Meter("cpu", memory=False) as m_points:
         verts = pose_bodies(body, bodies, cfg.batch_size)
-        points, is_surface = query_points(verts, body.faces, cfg.n_points, cfg.seed, cfg.surface_fraction,
-                                          cfg.bbox_padding, cfg.surface_sigma)
+        if cfg.sampling == "parts":
+            from .part_points import part_query_points
+            points, is_surface = part_query_points(body, bodies, cfg.n_points, cfg.seed, cfg.surface_fraction,
+                                                   cfg.surface_sigma)
+        else:
+            points, is_surface = query_points(verts, body.faces, cfg.n_points, cfg.seed, cfg.surface_fraction,
+                                              cfg.bbox_padding, cfg.surface_sigma)
     with Meter("cpu", memory=False) as m_gt:
         gt = ground_truth(verts, body.faces, points, cfg.gt_sign, cfg.gt_nsamples, cfg.cache_dir, cfg.use_cache)
 
@@ -415,6 +430,13 @@ def add_parser(sub):
     p.add_argument("--precision", default="full", choices=list(PRECISIONS),
                    help="decoder arithmetic: full (default), bf16 (bfloat16 layers) or tf32 (CUDA tensor cores); "
                         "reduced precision trades accuracy for speed on GPUs")
+    p.add_argument("--sampling", default=d.sampling, choices=list(SAMPLINGS),
+                   help="where the points lie: body (default: uniform in the body's padded bounding box + near the whole "
+                        "surface) or parts (COAP's per-part sampling: as many points per part, in its padded box and "
+                        "near its own faces; --points a multiple of the part count)")
+    p.add_argument("--surface-sigma", type=float, default=d.surface_sigma,
+                   help=f"std of the near-surface points' offsets, metres (default {d.surface_sigma}); the surface "
+                        "IoU depends strongly on it")
     p.add_argument("--out", default=None, help="write the results as JSON here")
     p.add_argument("--split", default="all", choices=["standard", "self_contact", "all"],
                    help="validation split: the standard set, the self-contact poses (volsmpl.contact_split: min(n-bodies, "
@@ -441,14 +463,14 @@ def run(args) -> int:
     cfg = EvalConfig(n_bodies=args.n_bodies, n_points=args.points, seed=args.seed, batch_size=args.batch_size,
                      device=args.device, timing=args.timing, timing_repeats=args.repeats, cache_dir=args.cache_dir,
                      use_cache=not args.no_cache, timing_threads=args.threads, gt_sign=args.gt_sign,
-                     precision=args.precision)
+                     precision=args.precision, sampling=args.sampling, surface_sigma=args.surface_sigma)
     init = {"config": {}, "init_seed": 0} if args.random_init else None
     if args.split == "self_contact":
         from .contact_split import evaluate_self_contact
         return _write_split(args, evaluate_self_contact(args.checkpoint, cfg, init))
     res = evaluate_checkpoint(args.checkpoint, config=cfg, random_init=init)
     print(f"validation set: {cfg.n_bodies} bodies (seed {cfg.seed}, digest {res.validation_digest[:12]}), "
-          f"{cfg.n_points} points each; ground truth {res.seconds['ground_truth']:.1f} s, "
+          f"{cfg.n_points} points each ({cfg.sampling} sampling, sigma {cfg.surface_sigma:g} m); ground truth {res.seconds['ground_truth']:.1f} s, "
           f"model {res.seconds['predict']:.1f} s")
     print(format_table(res))
     if res.resources:

@@ -41,7 +41,7 @@ import numpy as np
 import torch
 
 __all__ = ["VAL_SEED", "SHAPE_GROUPS", "validation_labels", "validation_bodies", "digest", "pose_bodies",
-           "query_points"]
+           "query_points", "surface_samples", "sub_seed"]
 
 #: seed of the validation set (PosePrior's 316 validation bodies in the paper). Training uses other seeds
 #: (and 'realistic' or 'mixed' poses); do not train on bodies from this seed.
@@ -56,7 +56,7 @@ SHAPE_GROUPS = {
 }
 
 
-def _sub_seed(*words: int) -> int:
+def sub_seed(*words: int) -> int:
     """A 32-bit seed derived from integers (independent streams per (seed, body, purpose))."""
     return int(np.random.SeedSequence([int(w) for w in words]).generate_state(1)[0])
 
@@ -67,7 +67,7 @@ def _body_spec(i: int, seed: int) -> dict:
     names = list(NAMED_POSES)
     group = list(SHAPE_GROUPS)[(i // 2) % len(SHAPE_GROUPS)]
     pose = f"named:{names[i // 2]}" if i % 2 == 1 and i // 2 < len(names) else "extreme"
-    return {"pose": pose, "shape": group, "seed": _sub_seed(seed, i)}
+    return {"pose": pose, "shape": group, "seed": sub_seed(seed, i)}
 
 
 def validation_labels(n: int = 64, seed: int = VAL_SEED) -> List[str]:
@@ -96,11 +96,11 @@ def validation_bodies(n: int = 64, seed: int = VAL_SEED, num_betas: int = 10) ->
         spec = _body_spec(i, seed)
         s = spec["seed"]
         if spec["pose"] == "extreme":
-            pose.append(sample_poses(1, seed=_sub_seed(s, 0), mode="extreme"))
+            pose.append(sample_poses(1, seed=sub_seed(s, 0), mode="extreme"))
         else:
             pose.append(named_pose(spec["pose"].split(":", 1)[1]))
-        betas.append(sample_betas(1, num_betas=num_betas, seed=_sub_seed(s, 1), **SHAPE_GROUPS[spec["shape"]]))
-        rng = np.random.default_rng(_sub_seed(s, 2))
+        betas.append(sample_betas(1, num_betas=num_betas, seed=sub_seed(s, 1), **SHAPE_GROUPS[spec["shape"]]))
+        rng = np.random.default_rng(sub_seed(s, 2))
         orient.append(Rotation.random(1, random_state=rng).as_rotvec())
         transl.append(rng.uniform(-0.5, 0.5, size=(1, 3)))
     f32 = dict(dtype=torch.float32)
@@ -136,15 +136,13 @@ def pose_bodies(body, bodies: Dict[str, torch.Tensor], batch_size: int = 16) -> 
 
 
 # ---------------------------------------------------------------------------------------------- query points
-def _surface_samples(vertices: torch.Tensor, faces: torch.Tensor, n: int, g: torch.Generator) -> torch.Tensor:
+def surface_samples(vertices: torch.Tensor, faces: torch.Tensor, n: int, g: torch.Generator) -> torch.Tensor:
     """Area-weighted uniform samples on one mesh: vertices (V, 3) float64, faces (F, 3) long -> (n, 3)."""
-    tri = vertices[faces]  # (F, 3, 3)
-    area = 0.5 * torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], dim=-1).norm(dim=-1)
-    fid = torch.multinomial(area, n, replacement=True, generator=g)
-    u = torch.rand(n, 2, generator=g, dtype=torch.float64)
-    r = u[:, :1].sqrt()  # uniform in the triangle: (1 - r, r (1 - u2), r u2)
-    bary = torch.cat([1 - r, r * (1 - u[:, 1:]), r * u[:, 1:]], dim=1)
-    return (bary[:, :, None] * tri[fid]).sum(dim=1)
+    from .partition import triangle_areas, uniform_barycentric
+
+    fid = torch.multinomial(triangle_areas(vertices, faces), n, replacement=True, generator=g)
+    bary = uniform_barycentric((n,), generator=g, dtype=torch.float64)
+    return (bary[:, :, None] * vertices[faces[fid]]).sum(dim=1)
 
 
 def query_points(vertices: torch.Tensor, faces, n_points: int = 60000, seed: int = VAL_SEED,
@@ -165,11 +163,11 @@ def query_points(vertices: torch.Tensor, faces, n_points: int = 60000, seed: int
     n_unif = n_points - n_surf
     out = torch.empty(v.shape[0], n_points, 3, dtype=torch.float64)
     for i in range(v.shape[0]):
-        g = torch.Generator().manual_seed(_sub_seed(seed, 1, i))
+        g = torch.Generator().manual_seed(sub_seed(seed, 1, i))
         lo, hi = v[i].amin(0) - bbox_padding, v[i].amax(0) + bbox_padding
         out[i, :n_unif] = lo + torch.rand(n_unif, 3, generator=g, dtype=torch.float64) * (hi - lo)
         if n_surf:
-            surf = _surface_samples(v[i], f, n_surf, g)
+            surf = surface_samples(v[i], f, n_surf, g)
             out[i, n_unif:] = surf + torch.randn(n_surf, 3, generator=g, dtype=torch.float64) * surface_sigma
     is_surface = torch.zeros(n_points, dtype=torch.bool)
     is_surface[n_unif:] = True
