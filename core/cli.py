@@ -18,7 +18,7 @@ SUBCOMMANDS = {
     "bench": ("volsmpl.bench", "time / memory / accuracy benchmark: VolumetricSMPL vs COAP vs winding numbers"),
     "body": ("volsmpl.body.cli", "export / inspect / pose the default body"),
     "demo": ("volsmpl.demo", "pose the default body; meshes, part picture, SDF slice and surfaces"),
-    "eval": ("volsmpl.evaluate", "evaluate a checkpoint on the validation set (paper Table 1 protocol)"),
+    "eval": ("volsmpl.evaluate", "evaluate a checkpoint on the validation set (paper Table 1 columns)"),
     "report": ("volsmpl.report", "write docs/report.md: every result table beside the paper's numbers"),
     "motion": ("volsmpl.apps.motion.cli", "scene-constrained walking: VolumetricSMPL vs COAP vs exact mesh (paper Table 5, D.1)"),
     "egohmr": ("volsmpl.apps.egohmr.cli", "egocentric body recovery, collision-guided diffusion: VolumetricSMPL vs COAP vs exact mesh (paper Table 4)"),

@@ -1,4 +1,4 @@
-"""Evaluation of a volumetric body model against exact mesh SDFs (paper Table 1 protocol), and `volsmpl eval`.
+"""Evaluation of a volumetric body model against exact mesh SDFs (paper Table 1 columns), and `volsmpl eval`.
 
     from volsmpl.evaluate import evaluate, evaluate_checkpoint
     res = evaluate_checkpoint("runs/x/ckpt")                  # 64 bodies x 60k points, default settings
@@ -8,6 +8,7 @@
 
 The parts of the protocol live in their own modules:
   - `volsmpl.validation`: the fixed validation set (bodies, query points, digests);
+  - `volsmpl.part_points`: COAP's per-part query points (`sampling='parts'`), the other sampling protocol;
   - `volsmpl.groundtruth_cache`: the exact ground-truth SDF of those points, cached on disk;
   - `volsmpl.metrics`: IoU (near-surface / uniform points) and SDF MSEs, per body then averaged.
 Every result records where and when it was made (`volsmpl.provenance.machine_info`, key 'meta').
@@ -68,7 +69,8 @@ PAPER_TABLE1 = _paper_table1()
 
 @dataclass
 class EvalConfig:
-    """Settings of one evaluation (defaults: the paper's Table 1 protocol on our validation set).
+    """Settings of one evaluation (defaults: 60k points per body, half uniform in the body's padded box, half
+    within 1 cm of the surface, on our validation set; the paper does not publish the sampling behind its Table 1).
 
     Attributes:
         n_bodies: validation bodies (64). seed: validation seed (VAL_SEED) for bodies and points.
@@ -407,7 +409,7 @@ def format_table(results) -> str:
 # ---------------------------------------------------------------------------------------------- CLI
 def add_parser(sub):
     d = EvalConfig()
-    p = sub.add_parser("eval", help="evaluate a checkpoint on the validation set (paper Table 1 protocol)",
+    p = sub.add_parser("eval", help="evaluate a checkpoint on the validation set (paper Table 1 columns)",
                        description="IoU (surface / uniform points) and SDF MSE against exact mesh SDFs on a fixed "
                                    "validation set of extreme poses and unusual shapes; optional time and memory.")
     p.add_argument("--checkpoint", default=None, help="checkpoint path (with or without .safetensors); default: shipped one")
