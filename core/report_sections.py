@@ -141,11 +141,15 @@ def eval_section(ctx) -> list[str]:
                         + [fmt(m.get("mse_sdf_surf"))])
             c = d.get("config") or {}
             lines.append(f"- {label}: {fmt(c.get('n_bodies'))} validation bodies, {fmt(c.get('n_points'))} points "
-                         f"each, ground-truth sign {c.get('gt_sign', 'not recorded')}, output "
-                         f"{get_path(d, 'extra.output') or 'sdf'}.")
+                         f"each ({c.get('sampling', 'body')} sampling, near-surface offsets "
+                         f"{fmt(c.get('surface_sigma'))} m), ground-truth sign {c.get('gt_sign', 'not recorded')}, "
+                         f"output {get_path(d, 'extra.output') or 'sdf'}.")
         rows.append([f"paper: {t['row_labels'][backend]}"] + [fmt_paper(t["rows"][backend][k]) for k, _ in cols]
                     + ["-"])
     rows.append([f"paper: {t['row_labels']['leap']}"] + [fmt_paper(t["rows"]["leap"][k]) for k, _ in cols] + ["-"])
+    lines.append("- The paper does not publish the sampling behind its Table 1, and the surface IoU depends strongly on "
+                 "the offsets' scale: `volsmpl eval --sampling parts --surface-sigma S` and the README's \"Sampling "
+                 "protocols\" (docs/eval_protocols.json) give both samplings at 1-3 cm.")
     return [paper_caption("1"), ""] + md_table(header, rows) + [""] + lines
 
 

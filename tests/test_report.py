@@ -220,3 +220,15 @@ def test_checkpoint_note_names_only_the_checkpoint_a_result_describes(repo):
     assert "coap_anny.safetensors" in line and "describes an earlier checkpoint" in line
     line = row({"checkpoint": "runs/x/coap_anny"})
     assert "coap_anny.safetensors" in line and "volsmpl_anny.safetensors" not in line
+
+
+def test_eval_section_states_the_sampling_of_each_result(tmp_path):
+    """The eval section says where each result's points lie (older JSONs, without the key, used the body box)."""
+    write(tmp_path / "docs" / "eval_volsmpl_anny.json", {"metrics": {"iou_mean": 0.9, "iou_surf": 0.85, "iou_unif": 0.95},
+          "config": {"n_bodies": 64, "n_points": 60000, "sampling": "parts", "surface_sigma": 0.02}})
+    write(tmp_path / "docs" / "eval_coap_anny.json", {"metrics": {"iou_mean": 0.8, "iou_surf": 0.7, "iou_unif": 0.9},
+          "config": {"n_bodies": 64, "n_points": 60000, "surface_sigma": 0.01}})
+    text, _ = report.build_report(tmp_path / "docs" / "report.md", root=tmp_path, git=NoGit())
+    assert "- VolumetricSMPL: 64 validation bodies, 60,000 points each (parts sampling, near-surface offsets 0.020 m)" in text
+    assert "- COAP: 64 validation bodies, 60,000 points each (body sampling, near-surface offsets 0.010 m)" in text
+    assert "does not publish the sampling behind its Table 1" in text
