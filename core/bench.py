@@ -31,7 +31,7 @@ A run measures:
     machine's memory is skipped with a note;
   - per-body time of the largest batch B against B = 1 for 'volsmpl', measured interleaved in one process on the
     same bodies (`volsmpl.bench_scaling`: the separate model rows drift with the machine between their runs);
-  - `evaluate.measure_resources` (evaluate's protocol: validation body 0, batch 1, sparse volsmpl) as a
+  - `eval_resources.measure_resources` (evaluate's protocol: validation body 0, batch 1, sparse volsmpl) as a
     cross-check of the volsmpl batch-1 row (`evaluate_protocol`); it reports the first call's memory;
   - the body-body occupancy check (paper Table B.4, `bench_bodybody`): the vertices of one posed default
     body (13,348) tested inside a second posed body that overlaps it, by exact generalised winding numbers
@@ -109,7 +109,7 @@ class BenchConfig:
         bodybody: run the body-body check. bodybody_vertices: test only N evenly spread vertices of body A (None: all).
         winding_repeats: timed winding-number runs (each takes seconds on a CPU).
         matmul_size / matmul_repeats: the fp32 matmul used to measure the machine's FLOP rate.
-        evaluate_check: also run evaluate.measure_resources (volsmpl, batch 1) as a cross-check.
+        evaluate_check: also run eval_resources.measure_resources (volsmpl, batch 1) as a cross-check.
         budget_s: wall-time budget of one (model, batch) measurement: when warmup + repeats calls would exceed
             it (judged from the first call), the worker drops the warm-up (the two memory calls warm up) and
             lowers repeats (at least 1); the counts used are reported.
@@ -266,8 +266,9 @@ def bench_bodybody(cfg: BenchConfig, body, checkpoint: Optional[str]) -> dict:
 
 
 def evaluate_protocol_check(cfg: BenchConfig, checkpoint: Optional[str]) -> dict:
-    """evaluate.measure_resources on sparse volsmpl (its protocol: validation body 0, batch 1)."""
-    from .evaluate import EvalConfig, measure_resources
+    """eval_resources.measure_resources on sparse volsmpl (its protocol: validation body 0, batch 1)."""
+    from .eval_resources import measure_resources
+    from .evaluate import EvalConfig
     from .nn.config import VolumeConfig
 
     spec = {"checkpoint": checkpoint} if checkpoint else {"config": VolumeConfig().to_dict(), "init_seed": cfg.init_seed}
@@ -374,7 +375,7 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
             log(f"volsmpl per body at B = {max(cfg.batches)} against B = 1, interleaved ...")
             result["batch_scaling"] = bench_batch_scaling(cfg, body, ckpts["volsmpl"])
         if cfg.evaluate_check and "volsmpl" in cfg.models:
-            log("evaluate.measure_resources cross-check ...")
+            log("eval_resources.measure_resources cross-check ...")
             result["evaluate_protocol"] = evaluate_protocol_check(cfg, ckpts["volsmpl"])
         if cfg.bodybody:
             log("body-body occupancy (winding numbers vs volsmpl) ...")

@@ -175,7 +175,7 @@ def summary_lines(result: dict) -> List[str]:
              f"(median of {len(mm['t_ms_all'])})"]
     ev = result.get("evaluate_protocol")
     if ev:
-        lines.append(f"evaluate.measure_resources (volsmpl, validation body 0, batch 1): t {ev['t_ms']:.1f} ms, "
+        lines.append(f"eval_resources.measure_resources (volsmpl, validation body 0, batch 1): t {ev['t_ms']:.1f} ms, "
                      f"t query {ev['t_query_ms']:.1f} ms, mem {_mem(ev['mem_bytes'])} ({ev['mem_method']})")
     if result.get("batch_scaling"):
         lines.append(scaling_line(result["batch_scaling"]))

@@ -13,13 +13,9 @@ The parts of the protocol live in their own modules:
   - `volsmpl.metrics`: IoU (near-surface / uniform points) and SDF MSEs, per body then averaged.
 Every result records where and when it was made (`volsmpl.provenance.machine_info`, key 'meta').
 
-Resources (optional, `timing=True`, `measure_resources`): measured with `volsmpl.meter` in a fresh
-subprocess on validation body 0 (batch 1) and all its points, under torch.no_grad(): median wall time over
-`timing_repeats` after `timing_warmup` runs, with encoding (a fresh encoding: partition + PointNet + NBW
-weights, then the query) and without (the query on a given encoding); peak memory of the first
-encode+query: CUDA max_memory_allocated, or on the CPU the peak RSS increase (see `volsmpl.meter.Meter`).
-On a CPU shared with other busy processes time with `--threads 1`: OpenMP threads waiting for each other
-can slow a query many times.
+Resources (optional, `timing=True`): `volsmpl.eval_resources.measure_resources`, in a fresh subprocess on
+validation body 0 (batch 1) and all its evaluation points. On a CPU shared with other busy processes time with
+`--threads 1`: OpenMP threads waiting for each other can slow a query many times.
 """
 from __future__ import annotations
 
@@ -27,7 +23,6 @@ import dataclasses
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Dict, Optional
@@ -38,7 +33,7 @@ import torch
 from . import paper
 from .groundtruth import SIGN_MODES
 from .groundtruth_cache import default_cache_dir, ground_truth
-from .meter import Meter, peak_memory, run_isolated, timed_ms
+from .meter import Meter
 from .metrics import compute_metrics
 from .models import model_kind
 from .precision import PRECISIONS
@@ -46,8 +41,8 @@ from .provenance import machine_info
 from .validation import VAL_SEED, digest, pose_bodies, query_points, validation_bodies, validation_labels
 from .volume_api import BodyVolume
 
-__all__ = ["PAPER_TABLE1", "EvalConfig", "EvalResult", "evaluate", "evaluate_volume", "evaluate_checkpoint",
-           "measure_resources", "resource_job", "format_table", "add_parser", "run"]
+__all__ = ["PAPER_TABLE1", "SAMPLINGS", "EvalConfig", "EvalResult", "evaluate", "evaluation_points", "evaluate_volume",
+           "evaluate_checkpoint", "format_table", "add_parser", "run"]
 
 def _paper_table1() -> dict:
     """The paper's Table 1 (volsmpl.paper) as this module prints it: IoU as fractions, MSE in m^2, time in ms."""
@@ -120,13 +115,19 @@ class EvalConfig:
             raise ValueError(f"EvalConfig.timing_warmup must be an integer >= 0, got {self.timing_warmup!r}.")
         if self.timing_threads is not None and (not isinstance(self.timing_threads, int) or self.timing_threads < 1):
             raise ValueError(f"EvalConfig.timing_threads={self.timing_threads!r}: give a positive integer or None.")
-        if not 0.0 <= self.surface_fraction <= 1.0:
-            raise ValueError(f"EvalConfig.surface_fraction={self.surface_fraction} must lie in [0, 1] (0.5: half near the surface).")
-        if not (self.bbox_padding >= 0 and self.surface_sigma >= 0):
-            raise ValueError(f"EvalConfig.bbox_padding={self.bbox_padding} and surface_sigma={self.surface_sigma} "
-                             f"must be >= 0 (metres).")
+        if not 0.0 < self.surface_fraction < 1.0:
+            raise ValueError(f"EvalConfig.surface_fraction={self.surface_fraction} must lie strictly between 0 and 1 "
+                             f"(0.5: half near the surface): each IoU column needs points of its own.")
+        if not math.isfinite(self.surface_sigma) or self.surface_sigma < 0:
+            raise ValueError(f"--surface-sigma {self.surface_sigma}: give a finite scale >= 0 in metres (default 0.01).")
+        if not math.isfinite(self.bbox_padding) or self.bbox_padding < 0:
+            raise ValueError(f"EvalConfig.bbox_padding={self.bbox_padding}: give a finite padding >= 0 in metres (0.05).")
         if self.sampling not in SAMPLINGS:
             raise ValueError(f"EvalConfig.sampling={self.sampling!r}: use one of {', '.join(SAMPLINGS)}.")
+        n_surf = int(round(self.n_points * self.surface_fraction))
+        if self.sampling == "body" and not 0 < n_surf < self.n_points:
+            raise ValueError(f"--points {self.n_points} leaves the {'near-surface' if n_surf == 0 else 'uniform'} set "
+                             f"empty at surface_fraction {self.surface_fraction}; give more points per body.")
         if self.device not in ("cpu", "cuda") and not str(self.device).startswith("cuda:"):
             raise ValueError(f"EvalConfig.device={self.device!r}: use 'cpu' or 'cuda'.")
         if self.precision not in PRECISIONS:
@@ -189,13 +190,7 @@ def evaluate(predict_fn: Callable, bodies: Optional[Dict[str, torch.Tensor]] = N
     body = body.to(device)
     with Meter("cpu", memory=False) as m_points:
         verts = pose_bodies(body, bodies, cfg.batch_size)
-        if cfg.sampling == "parts":
-            from .part_points import part_query_points
-            points, is_surface = part_query_points(body, bodies, cfg.n_points, cfg.seed, cfg.surface_fraction,
-                                                   cfg.surface_sigma)
-        else:
-            points, is_surface = query_points(verts, body.faces, cfg.n_points, cfg.seed, cfg.surface_fraction,
-                                              cfg.bbox_padding, cfg.surface_sigma)
+        points, is_surface = evaluation_points(body, bodies, verts, cfg)
     with Meter("cpu", memory=False) as m_gt:
         gt = ground_truth(verts, body.faces, points, cfg.gt_sign, cfg.gt_nsamples, cfg.cache_dir, cfg.use_cache)
 
@@ -221,6 +216,16 @@ def evaluate(predict_fn: Callable, bodies: Optional[Dict[str, torch.Tensor]] = N
     return EvalResult(name=name, metrics=metrics, per_body=per_body, config=dataclasses.asdict(cfg),
                       validation_digest=digest(bodies), points_digest=digest(points), seconds=seconds,
                       meta=machine_info(cfg.device, torch.get_num_threads()))
+
+
+def evaluation_points(body, bodies: Dict[str, torch.Tensor], verts: torch.Tensor, cfg: EvalConfig):
+    """The query points of an evaluation by `cfg.sampling`: points (B, n_points, 3), is_surface (n_points,).
+    verts: the bodies posed (B, V, 3), for the body-box sampling; the per-part one poses them itself."""
+    if cfg.sampling == "parts":
+        from .part_points import part_query_points
+        return part_query_points(body, bodies, cfg.n_points, cfg.seed, cfg.surface_fraction, cfg.surface_sigma)
+    return query_points(verts, body.faces, cfg.n_points, cfg.seed, cfg.surface_fraction, cfg.bbox_padding,
+                        cfg.surface_sigma)
 
 
 def _is_validation_set(bodies, cfg: EvalConfig) -> bool:
@@ -256,6 +261,7 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
         if resource_spec is None:
             raise ValueError("timing=True needs resource_spec={'checkpoint': PATH} or {'config': dict, 'init_seed': int} "
                              "so the subprocess can rebuild the same volume; or use evaluate_checkpoint.")
+        from .eval_resources import measure_resources
         res.resources = measure_resources(resource_spec, cfg)
     return res
 
@@ -289,84 +295,6 @@ def evaluate_checkpoint(path: str | os.PathLike | None, config: Optional[EvalCon
     res = evaluate_volume(vol, body, config=config, name=name, resource_spec=spec, bodies=bodies, **overrides)
     shipped = f"shipped {model_kind('volsmpl').checkpoint}" if random_init is None else None
     res.extra["checkpoint"] = spec.get("checkpoint") or shipped
-    return res
-
-
-# ---------------------------------------------------------------------------------------------- resources
-def measure_resources(spec: dict, config: Optional[EvalConfig] = None, **overrides) -> dict:
-    """Time and memory of one query (batch 1, body 0 of the validation set, all its points), in a fresh
-    Python subprocess (`meter.run_isolated` of `resource_job`) so that memory peaks are not hidden by
-    earlier allocations of this process.
-
-    Args:
-        spec: {'checkpoint': PATH or None (shipped), 'model': 'volsmpl' | 'coap'} or {'config': VolumeConfig
-            dict, 'init_seed': int}; optional 'body_model': SMPL-format file (default body if None).
-        config: EvalConfig (n_points, seed, device, timing_repeats, timing_warmup, timing_threads, ...).
-    Returns:
-        dict: t_ms (median, encoding included), t_query_ms (median, encoding excluded), t_ms_all /
-        t_query_ms_all (every timed run), mem_bytes, mem_total_bytes, mem_kind ('cuda max_memory_allocated'
-        or 'cpu peak RSS increase'), mem_method (see `volsmpl.meter.Meter`), device, threads, points.
-    """
-    cfg = dataclasses.replace(config or EvalConfig(), **overrides)
-    from .body.model import create_body
-
-    body = create_body(spec.get("body_model"))
-    bodies = {k: v[:1] for k, v in validation_bodies(1, cfg.seed, num_betas=body.num_betas).items()}
-    verts = pose_bodies(body, bodies)
-    points, _ = query_points(verts, body.faces, cfg.n_points, cfg.seed, cfg.surface_fraction, cfg.bbox_padding,
-                             cfg.surface_sigma)
-    with tempfile.TemporaryDirectory() as tmp:
-        inputs = os.path.join(tmp, "inputs.pt")
-        torch.save({"bodies": bodies, "points": points}, inputs)
-        job = {"spec": spec, "inputs": inputs, "device": cfg.device, "repeats": cfg.timing_repeats,
-               "warmup": cfg.timing_warmup, "threads": cfg.timing_threads or torch.get_num_threads(),
-               "precision": cfg.precision}
-        return run_isolated("volsmpl.evaluate:resource_job", job, timeout_s=1800)
-
-
-def resource_job(job: dict) -> dict:
-    """The measurement of `measure_resources`, run in the isolated process: job {'spec', 'inputs' (a file of
-    {'bodies', 'points'}), 'device', 'threads', 'warmup', 'repeats'}; returns its result dict."""
-    import gc
-
-    from .body.model import create_body
-    from .nn.config import VolumeConfig
-    from .attach import attach_volume
-
-    torch.set_num_threads(int(job["threads"]))
-    device = torch.device(job["device"])
-    spec = job["spec"]
-    body = create_body(spec.get("body_model"))
-    if "config" in spec:
-        torch.manual_seed(int(spec.get("init_seed", 0)))
-        vol = attach_volume(body, pretrained=False, config=VolumeConfig.from_dict(spec["config"]))
-    else:
-        vol = attach_volume(body, checkpoint=spec.get("checkpoint"), model=spec.get("model", "volsmpl"))
-    body, vol = body.to(device), vol.to(device)
-    if job.get("precision", "full") != "full":
-        vol.set_precision(job["precision"])
-    data = torch.load(job["inputs"])
-    with torch.no_grad():
-        out = body(**{k: v.to(device) for k, v in data["bodies"].items()})
-    pts = data["points"].to(device)
-    warmup, repeats = int(job["warmup"]), int(job["repeats"])
-
-    def full():  # encoding included: a fresh encoding (bypasses the per-output cache), then the query
-        return vol.query_encoded(vol.encode(out, fresh=True), pts)
-
-    gc.collect()
-    res = {"device": str(device), "threads": torch.get_num_threads(), "points": int(pts.shape[1])}
-    with torch.no_grad():
-        res.update(peak_memory(full, device))  # the first call: one-time allocations included
-        for _ in range(warmup):
-            full()
-        t_full = timed_ms([full] * repeats, device)
-        enc = vol.encode(out, fresh=True)
-        query = lambda: vol.query_encoded(enc, pts)
-        for _ in range(warmup):
-            query()
-        t_query = timed_ms([query] * repeats, device)
-    res.update(t_ms=float(np.median(t_full)), t_query_ms=float(np.median(t_query)), t_ms_all=t_full, t_query_ms_all=t_query)
     return res
 
 

@@ -64,6 +64,9 @@ def part_query_points(body, bodies: Dict[str, torch.Tensor], n_points: int = 600
     per = n_points // K
     n_surf = int(round(per * surface_fraction))
     n_unif = per - n_surf
+    if n_surf == 0 or n_unif == 0:
+        raise ValueError(f"per-part sampling of {n_points} points gives each of the {K} parts {per}, which leaves its "
+                         f"{'near-surface' if n_surf == 0 else 'uniform'} set empty; give --points of at least {2 * K}.")
     faces = part.faces.cpu().long()
     tight = [faces[torch.as_tensor(ids, dtype=torch.long)] for ids in part.tight_face_ids]
     like = body.v_template

@@ -259,6 +259,15 @@ def test_config_errors():
         ev.EvalConfig(n_points=0)
     with pytest.raises(ValueError, match="surface_fraction"):
         ev.EvalConfig(surface_fraction=1.5)
+    for fraction in (0.0, 1.0):  # one IoU column would score an empty set as 100 %
+        with pytest.raises(ValueError, match="strictly between 0 and 1"):
+            ev.EvalConfig(surface_fraction=fraction)
+    with pytest.raises(ValueError, match="--points 1 leaves the near-surface set empty"):
+        ev.EvalConfig(n_points=1)
+    for sigma in (-0.01, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="--surface-sigma"):
+            ev.EvalConfig(surface_sigma=sigma)
+    ev.EvalConfig(n_points=2, surface_sigma=0.0)  # the smallest sets that hold a point each
 
 
 # ---------------------------------------------------------------------------------------------- CLI

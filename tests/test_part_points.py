@@ -8,6 +8,7 @@ import pytest
 import torch
 import trimesh
 
+from volsmpl import eval_resources
 from volsmpl import evaluate as ev
 from volsmpl import validation as val
 from volsmpl.part_points import part_query_points
@@ -81,6 +82,8 @@ def test_reproducible_and_a_prefix_for_fewer_bodies(body, setup):
 def test_points_must_split_evenly_over_the_parts(body, setup):
     with pytest.raises(ValueError, match="multiple of the 16 parts"):
         part_query_points(body, setup[0], n_points=1000)
+    with pytest.raises(ValueError, match="near-surface set empty; give --points of at least 32"):
+        part_query_points(body, setup[0], n_points=16)   # one point per part: one of the two sets would be empty
     with pytest.raises(ValueError, match="sampling"):
         ev.EvalConfig(sampling="grid")
 
@@ -97,3 +100,20 @@ def test_eval_cli_parts_sampling_of_an_exact_predictor(body, tmp_path):
                                                              use_cache=False))
     assert res.metrics["iou_surf"] == 1.0 and res.metrics["iou_unif"] == 1.0
     assert res.config["sampling"] == "parts"
+
+
+def test_timing_measures_the_points_of_the_evaluation(body, monkeypatch):
+    """`measure_resources` times body 0 on the points the accuracy columns were measured on, in either sampling."""
+    seen = {}
+
+    def fake_isolated(target, job, timeout_s):
+        seen["points"] = torch.load(job["inputs"])["points"]
+        return {}
+
+    monkeypatch.setattr(eval_resources, "run_isolated", fake_isolated)
+    bodies = val.validation_bodies(1)
+    for sampling in ("parts", "body"):
+        cfg = ev.EvalConfig(n_points=16 * 40, sampling=sampling)
+        eval_resources.measure_resources({"checkpoint": None}, cfg)
+        expected, _ = ev.evaluation_points(body, bodies, val.pose_bodies(body, bodies), cfg)
+        assert torch.equal(seen["points"], expected), sampling
