@@ -55,6 +55,7 @@ class TrainConfig:
     ckpt_every: int = 200
     log_every: int = 10
     keep_ckpts: int = 2
+    keep_every: int = 0             # > 0: never prune checkpoints whose step is a multiple of this (for later evaluation)
     num_threads: int = 0            # torch CPU threads (0: leave torch's default)
     num_workers: int = 0            # processes that make batches ahead of the step (0: in the training process)
     model_kind: str = "volsmpl"     # 'volsmpl' (SDF, eq. 3) or 'coap' (occupancy baseline, binary cross-entropy)
@@ -116,7 +117,8 @@ class TrainConfig:
 #: integer fields and their smallest value
 _INTS = {"steps": 1, "batch_size": 1, "micro_batch": 1, "n_uniform": 0, "n_surface": 0, "n_body_surface": 0,
          "n_contact_surface": 0,
-         "gt_rays": 1, "seed": 0, "ckpt_every": 1, "log_every": 1, "keep_ckpts": 1, "num_threads": 0,
+         "gt_rays": 1, "seed": 0, "ckpt_every": 1, "log_every": 1, "keep_ckpts": 1, "keep_every": 0,
+         "num_threads": 0,
          "num_workers": 0, "anneal_start": 0}
 #: real fields: (smallest value, whether it must be above it rather than at least it)
 _REALS = {"lr": (0.0, True), "lr_final": (0.0, True), "sign_tau": (0.0, True), "sign_weight": (0.0, False),

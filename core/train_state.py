@@ -107,7 +107,9 @@ def load_optimizer(opt: torch.optim.Optimizer, tensors: dict, scalars: dict) -> 
 def save_training_state(out_dir: Path, step: int, volume, opt, cfg, summary: dict, ema=None,
                         shard_bytes: int | None = None) -> Path:
     """Write <out>/ckpt-<step>/ (model, optimised weights, Adam's moments, state.json) and point <out>/latest at it;
-    keep the newest `cfg.keep_ckpts` folders. With a weight average the model file holds the average."""
+    keep the newest `cfg.keep_ckpts` folders and, with `cfg.keep_every` > 0, those whose step is a multiple of it
+    (milestones, e.g. a phase's end before the next phase resumes from it). With a weight average the model file
+    holds the average."""
     out_dir = Path(out_dir)
     shard_bytes = SHARD_BYTES if shard_bytes is None else shard_bytes
     d = out_dir / f"ckpt-{step:08d}"
@@ -142,7 +144,8 @@ def save_training_state(out_dir: Path, step: int, volume, opt, cfg, summary: dic
     os.replace(latest_tmp, out_dir / "latest")
     ckpts = sorted(p for p in out_dir.glob("ckpt-*") if p.is_dir())
     for old in ckpts[:-cfg.keep_ckpts]:
-        shutil.rmtree(old, ignore_errors=True)
+        if not (cfg.keep_every and int(old.name.split("-")[1]) % cfg.keep_every == 0):
+            shutil.rmtree(old, ignore_errors=True)
     return d
 
 

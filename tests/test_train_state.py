@@ -134,3 +134,19 @@ def test_a_run_moves_between_cpu_and_cuda(tmp_path):
     r = train(cfg, tmp_path / "a", resume=True, max_steps=2, device="cpu", quiet=True)
     assert r["step"] == 6 and all(math.isfinite(x) for x in r["losses"])
     shutil.rmtree(tmp_path / "a")
+
+
+def test_pruning_keeps_the_newest_and_the_milestones(body, tmp_path):
+    """keep_ckpts newest folders survive, and with keep_every those at multiples of it (a phase's end stays
+    evaluable after the next phase resumed from it); without keep_every only the newest."""
+    vol = volsmpl.attach_volume(body, pretrained=False, config=TINY)
+    opt = torch.optim.Adam(vol.net.parameters(), lr=1e-4)
+    for keep_every, left in ((4, [4, 8, 10]), (0, [10])):
+        out = tmp_path / f"every{keep_every}"
+        cfg = tiny_cfg(keep_ckpts=1, keep_every=keep_every)
+        for step in (2, 4, 6, 8, 10):
+            ts.save_training_state(out, step, vol, opt, cfg, {"loss": 1.0, "train_seconds": 1.0})
+        assert sorted(int(p.name.split("-")[1]) for p in out.glob("ckpt-*")) == left
+        assert ts.latest_checkpoint(out).name == "ckpt-00000010"
+    with pytest.raises(ValueError, match="keep_every"):
+        tiny_cfg(keep_every=-1)
