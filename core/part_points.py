@@ -86,9 +86,8 @@ def part_query_points(body, bodies: Dict[str, torch.Tensor], n_points: int = 600
                 local = box_min[j, :, None] + u * (box_max[j] - box_min[j])[:, None]   # (K, n_unif, 3) part frames
                 world = torch.einsum("kij,knj->kni", G[j, :, :3, :3], local) + G[j, :, None, :3, 3]
                 out[i, :K * n_unif] = world.reshape(-1, 3)
-                if n_surf:
-                    surf = torch.cat([surface_samples(verts[j], f, n_surf, g) for f in tight])
-                    out[i, K * n_unif:] = surf + torch.randn(K * n_surf, 3, generator=g, dtype=torch.float64) * surface_sigma
+                surf = torch.cat([surface_samples(verts[j], f, n_surf, g) for f in tight])
+                out[i, K * n_unif:] = surf + torch.randn(K * n_surf, 3, generator=g, dtype=torch.float64) * surface_sigma
     is_surface = torch.zeros(n_points, dtype=torch.bool)
     is_surface[K * n_unif:] = True
     return out.float(), is_surface
