@@ -227,7 +227,7 @@ def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optio
                     "cuda_graphs": name not in EAGER_ENCODE,
                     "cuda_graph_queries": name in GRAPH_QUERIES},
            "device": cfg.device, "threads": cfg.threads or torch.get_num_threads(), "warmup": cfg.warmup,
-           "repeats": cfg.repeats, "budget_s": cfg.budget_s}
+           "repeats": cfg.repeats, "budget_s": cfg.budget_s, "matmul_size": cfg.matmul_size}
     r = run_job("volsmpl.bench_jobs:volume_job", job, inputs, cfg.timeout_s)
     r["weights"] = "trained" if checkpoint else "random init"
     return r

@@ -31,8 +31,12 @@ on the CPU) of the vertices of one posed body w.r.t. a second posed body that ov
   - `profile_query` (torch.profiler, CPU or CUDA): ops_per_query, the operator calls of one query on a cached
     encoding (top-level aten operators: an operator's own inner calls are not counted again), and
     t_decoder_ms, the time inside the volume's decoder scope (`volume.DECODER_SCOPE`), median of up to 3
-    profiled queries; decoder_gflops = decoder FLOPs / t_decoder_ms is the decoder's own rate (report it beside
-    the same run's fp32 matmul rate).
+    profiled queries; decoder_gflops = decoder FLOPs / t_decoder_ms is the decoder's own rate.
+  - matmul_gflops_local: the fp32 matmul rate (`matmul_rate`, job['matmul_size']) measured in the job's own
+    process just before and just after the profiled queries; decoder_share = decoder_gflops / their mean, the
+    decoder's share of the machine's matmul rate at the moment it ran (the machine's speed drifts by tens of
+    per cent within minutes, so a rate measured once at the start of a run is no yardstick for a job minutes
+    later).
 
 `matmul_rate` measures the machine's fp32 matmul rate in this process.
 """
@@ -134,10 +138,11 @@ def flops_per_pair(net) -> Optional[int]:
 
 def derived(r: dict) -> dict:
     """Per-point decoder evaluations, decoder GFLOP per query, achieved GFLOP/s (over the whole query and, when
-    profiled, over the decoder alone) and per-body times of a volume_job result."""
+    profiled, over the decoder alone, and that rate's share of the matmul rate measured beside it) and per-body
+    times of a volume_job result."""
     pairs, fpp = r.get("decoder_pairs"), r.get("flops_per_pair")
     out = {"evals_per_point": None, "decoder_gflop": None, "gflops": None, "decoder_gflops": None,
-           "t_body_ms": r["t_ms"] / r["batch"], "t_query_body_ms": r["t_query_ms"] / r["batch"]}
+           "decoder_share": None, "t_body_ms": r["t_ms"] / r["batch"], "t_query_body_ms": r["t_query_ms"] / r["batch"]}
     if pairs is not None:
         out["evals_per_point"] = pairs / (r["batch"] * r["points"])
         if fpp:
@@ -145,6 +150,9 @@ def derived(r: dict) -> dict:
             out["gflops"] = out["decoder_gflop"] / (r["t_query_ms"] / 1e3) if r["t_query_ms"] > 0 else None
             t_dec = r.get("t_decoder_ms")
             out["decoder_gflops"] = out["decoder_gflop"] / (t_dec / 1e3) if t_dec else None
+            local = r.get("matmul_gflops_local")
+            if out["decoder_gflops"] is not None and local:
+                out["decoder_share"] = out["decoder_gflops"] / float(np.mean(local))
     return out
 
 
@@ -263,7 +271,10 @@ def volume_job(job: dict) -> dict:
         evals0 = vol.decoder_evaluations if counts else 0
         t_query = timed_ms([query] * rep, device)
         pairs = (vol.decoder_evaluations - evals0) // rep if counts else None
+        size = int(job.get("matmul_size", 4096))
+        before = matmul_rate(size, 1, job["device"])["gflops"]
         res.update(profile_query(query, min(3, rep), device))
+        res["matmul_gflops_local"] = [before, matmul_rate(size, 1, job["device"])["gflops"]]
     if job.get("return_pred"):
         torch.save(pred["v"].cpu(), job["pred_path"])
     res.update(t_ms=float(np.median(t_full)), t_query_ms=float(np.median(t_query)), t_ms_all=t_full,

@@ -119,7 +119,8 @@ def model_rows(result: dict) -> Tuple[List[str], List[List[str]]]:
                          _f(r["gflops"], "{:.1f}")] + _acc_cells(acc)
                         + [_f(r.get("t_body_ms"), "{:.1f}"), _f(r.get("t_query_body_ms"), "{:.1f}"),
                            _f(r.get("ops_per_query"), "{:d}"), _f(r.get("decoder_gflops"), "{:.1f}"),
-                           _f(_ratio(r.get("decoder_gflops"), mm), "{:.0%}")])
+                           _f(r["decoder_share"] if r.get("decoder_share") is not None
+                              else _ratio(r.get("decoder_gflops"), mm), "{:.0%}")])
     return head, rows
 
 
@@ -208,7 +209,9 @@ def to_markdown(result: dict) -> str:
             + " during encoding + query (mem query: query on a cached encoding); dec. evals/pt: part decoders evaluated per query point; decoder GFLOP: pairs x FLOPs per decoder "
             "evaluation; GFLOP/s: decoder GFLOP / t query; runs: timed runs (fewer than asked when over the time budget); "
             "t/body: t / B; ops/query: top-level operator calls of one query (torch.profiler); decoder GFLOP/s: decoder "
-            "GFLOP / the time inside the decoder (profiled); decoder / matmul: that rate over the same run's fp32 matmul rate.", "", "## Ratios (same run) beside the paper's (GPU)", "",
+            "GFLOP / the time inside the decoder (profiled); decoder / matmul: that rate over the fp32 matmul rate "
+            "measured in the same process just before and after the profiled queries (their mean; results without it: "
+            "over the run's rate in the header).", "", "## Ratios (same run) beside the paper's (GPU)", "",
             markdown_table(*ratio_rows(result))]
     if result.get("batch_scaling"):
         out += ["", "## Per-body time by batch size, interleaved in one process", "",

@@ -65,6 +65,9 @@ def test_operator_counts_and_decoder_rate(tiny_run):
         assert r["ops_per_query"] > 0 and sum(r["op_names"].values()) == r["ops_per_query"]
         assert r["t_decoder_ms"] > 0 and r["t_decoder_ms"] <= r["t_query_ms"] * 10  # profiled: loose, never timed
         assert r["decoder_gflops"] == pytest.approx(r["decoder_gflop"] / (r["t_decoder_ms"] / 1e3))
+        local = r["matmul_gflops_local"]   # the --matmul-size product, before and after the profiled queries
+        assert len(local) == 2 and min(local) > 0
+        assert r["decoder_share"] == pytest.approx(r["decoder_gflops"] / ((local[0] + local[1]) / 2))
         assert r["t_body_ms"] == pytest.approx(r["t_ms"]) and r["t_query_body_ms"] == pytest.approx(r["t_query_ms"])
     assert "ops/query" in md and "decoder / matmul" in md
 
@@ -253,3 +256,16 @@ def test_batch_scaling_job_times_the_same_bodies_both_ways(tmp_path):
            "config": {"batches": [1, 2], "n_points": 1500, "repeats": 3, "warmup": 1, "device": "cpu"},
            "models": {}, "ratios": {}, "notes": [], "batch_scaling": s}
     assert "## Per-body time by batch size, interleaved in one process" in to_markdown(res)
+
+
+def test_decoder_share_column_uses_the_matmul_measured_beside_the_decoder():
+    """'decoder / matmul' divides by the rate measured in the job's process when the row has it, else by the run's."""
+    from volsmpl.bench_report import model_rows
+    row = {"t_ms": 10.0, "t_query_ms": 5.0, "t_ms_all": [10.0], "mem_bytes": 1, "params": 1, "evals_per_point": 1.0,
+           "decoder_gflop": 1.0, "gflops": 200.0, "decoder_gflops": 50.0, "ops_per_query": 3}
+    result = {"matmul": {"gflops": 100.0}, "accuracy": {},
+              "models": {"volsmpl": {"status": "ok", "model": "volsmpl", "batches": {"1": dict(row, decoder_share=0.25)}},
+                         "volsmpl-dense": {"status": "ok", "model": "volsmpl", "batches": {"1": row}}}}
+    head, rows = model_rows(result)
+    col = head.index("decoder / matmul")
+    assert [r[col] for r in rows] == ["25%", "50%"]
