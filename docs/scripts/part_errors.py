@@ -21,7 +21,6 @@ from volsmpl.attach import attach_volume
 from volsmpl.body.model import create_body
 from volsmpl.evaluate import EvalConfig, evaluation_points
 from volsmpl.groundtruth_cache import ground_truth
-from volsmpl.partition import Partition
 from volsmpl.validation import pose_bodies, validation_bodies
 
 #: near-surface points closer than this to the surface (metres) enter the distance-error columns
@@ -40,7 +39,7 @@ def main():
     torch.set_num_threads(args.threads)
     body = create_body()
     vol = attach_volume(body, checkpoint=args.checkpoint)
-    names = Partition(body, n_samples=2).table.part_names
+    names = vol.partition.table.part_names
     K = len(names)
     cfg = EvalConfig(n_bodies=args.n_bodies, n_points=args.points, surface_sigma=args.sigma, sampling="parts")
     bodies = validation_bodies(args.n_bodies, cfg.seed)
@@ -73,7 +72,8 @@ def main():
                 row["sdf_bias_mm"] = 1e3 * err.mean().item()
                 row["sdf_median_abs_mm"] = 1e3 * err.abs().median().item()
                 row["sdf_rms_mm"] = 1e3 * err.pow(2).mean().sqrt().item()
-        row["share_of_surface_errors"] = wrong[:, K * n_unif + k * n_surf:K * n_unif + (k + 1) * n_surf].sum().item()
+            if label == "surf":
+                row["share_of_surface_errors"] = wrong[:, sl].sum().item()
         rows.append(row)
     total = sum(r["share_of_surface_errors"] for r in rows) or 1
     for r in rows:
