@@ -80,7 +80,8 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
             raise ValueError(f"{path} holds a {held} model; call attach_volume(body, checkpoint=..., model='{held}').")
         config = kind.config_from_dict(cfg_dict)
     partition = Partition(body, n_samples=(config.n_surface_samples if config else 1000),
-                          box_padding=(config.box_padding if config else 0.125))
+                          box_padding=(config.box_padding if config else 0.125),
+                          draws=(config.encoder_draws if config else 1))
     net = kind.build_network(partition.num_parts, config)
     if state is not None:
         try:

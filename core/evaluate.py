@@ -85,6 +85,8 @@ class EvalConfig:
             on the whole mesh: `validation.query_points`) or 'parts' (COAP's per-part sampling: the same number
             of points per body part, uniform in its padded box and near its own faces: `part_points`;
             bbox_padding does not apply, the boxes are the models' 12.5 %).
+        encoder_draws: surface sample sets whose codes the encoder averages (`Volume.set_encoder_draws`) during
+            the evaluation; None (default): the checkpoint's own (1 unless it was trained with more).
     """
 
     n_bodies: int = 64
@@ -105,6 +107,7 @@ class EvalConfig:
     timing_threads: Optional[int] = None
     precision: str = "full"
     sampling: str = "body"
+    encoder_draws: Optional[int] = None
 
     def __post_init__(self):
         for name in ("n_bodies", "n_points", "batch_size", "timing_repeats"):
@@ -122,6 +125,8 @@ class EvalConfig:
             raise ValueError(f"--surface-sigma {self.surface_sigma}: give a finite scale >= 0 in metres (default 0.01).")
         if not math.isfinite(self.bbox_padding) or self.bbox_padding < 0:
             raise ValueError(f"EvalConfig.bbox_padding={self.bbox_padding}: give a finite padding >= 0 in metres (0.05).")
+        if self.encoder_draws is not None and (not isinstance(self.encoder_draws, int) or self.encoder_draws < 1):
+            raise ValueError(f"--encoder-draws {self.encoder_draws}: give a positive number of surface sample sets.")
         if self.sampling not in SAMPLINGS:
             raise ValueError(f"EvalConfig.sampling={self.sampling!r}: use one of {', '.join(SAMPLINGS)}.")
         n_surf = int(round(self.n_points * self.surface_fraction))
@@ -243,6 +248,10 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
     before = volume.precision if isinstance(volume, BodyVolume) else "full"   # stand-ins compute as they are
     if cfg.precision != before:
         volume.set_precision(cfg.precision)   # ValueError for a volume without that mode
+    draws_before = None
+    if cfg.encoder_draws is not None:
+        draws_before = volume.partition.draws
+        volume.set_encoder_draws(cfg.encoder_draws)   # ValueError for a volume without an encoder
     try:
         if volume.is_sdf:
             res = evaluate(lambda out, pts: volume.query(out, pts), bodies=bodies, body=body, config=cfg, name=name)
@@ -252,6 +261,8 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
     finally:
         if cfg.precision != before:
             volume.set_precision(before)
+        if draws_before is not None:
+            volume.set_encoder_draws(draws_before)
     if not volume.is_sdf:
         for k in [k for k in res.metrics if k.startswith("mse")]:  # not distances: no SDF error to report
             res.metrics[k] = None
@@ -367,6 +378,9 @@ def add_parser(sub):
     p.add_argument("--surface-sigma", type=float, default=d.surface_sigma,
                    help=f"std of the near-surface points' offsets, metres (default {d.surface_sigma}); the surface "
                         "IoU depends strongly on it")
+    p.add_argument("--encoder-draws", type=int, default=None,
+                   help="encode each part as the mean code of this many fixed surface sample sets (default: the "
+                        "checkpoint's own, 1 unless trained with more); more sets, steadier codes, slower encoding")
     p.add_argument("--out", default=None, help="write the results as JSON here")
     p.add_argument("--split", default="all", choices=["standard", "self_contact", "all"],
                    help="validation split: the standard set, the self-contact poses (volsmpl.contact_split: min(n-bodies, "
@@ -393,7 +407,8 @@ def run(args) -> int:
     cfg = EvalConfig(n_bodies=args.n_bodies, n_points=args.points, seed=args.seed, batch_size=args.batch_size,
                      device=args.device, timing=args.timing, timing_repeats=args.repeats, cache_dir=args.cache_dir,
                      use_cache=not args.no_cache, timing_threads=args.threads, gt_sign=args.gt_sign,
-                     precision=args.precision, sampling=args.sampling, surface_sigma=args.surface_sigma)
+                     precision=args.precision, sampling=args.sampling, surface_sigma=args.surface_sigma,
+                     encoder_draws=args.encoder_draws)
     init = {"config": {}, "init_seed": 0} if args.random_init else None
     if args.split == "self_contact":
         from .contact_split import evaluate_self_contact

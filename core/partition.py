@@ -81,11 +81,12 @@ class Partition(torch.nn.Module):
         n_samples: surface samples per part for the encoder (half tight, half extended faces, as COAP).
         box_padding: relative padding of part boxes (paper: 12.5%).
         seed: seed of the fixed surface sample set.
+        draws: independent sets of n_samples per part (`set_draws`); the encoder averages its code over them.
     Buffers: vertex_labels (V,) (part of each vertex; part k's vertices: vertex_labels == k), face_labels (F,),
-    faces (F,3), sample_faces (K, n) / sample_bary (K, n, 3) fixed surface samples.
+    faces (F,3), sample_faces (K, draws * n) / sample_bary (K, draws * n, 3) fixed surface samples.
     """
 
-    def __init__(self, body, n_samples: int = 1000, box_padding: float = 0.125, seed: int = 0):
+    def __init__(self, body, n_samples: int = 1000, box_padding: float = 0.125, seed: int = 0, draws: int = 1):
         super().__init__()
         arr = body_arrays(body)
         self.table: PartTable = make_part_table(arr["parents"])
@@ -125,12 +126,22 @@ class Partition(torch.nn.Module):
         self.register_buffer("_tight_mask", mask_t, persistent=False)
         self.register_buffer("_ext_pad", pad_e, persistent=False)
         self.register_buffer("_ext_mask", mask_e, persistent=False)
-        # fixed, reproducible samples drawn on the rest mesh (area-weighted): smooth in pose, cheap per forward
-        gen = torch.Generator().manual_seed(seed)
-        v0 = torch.as_tensor(arr["v_template"], dtype=torch.float64)[None]
-        f_ids, bary = self._draw(v0, gen)
-        self.register_buffer("sample_faces", f_ids[0], persistent=False)
-        self.register_buffer("sample_bary", bary[0].float(), persistent=False)
+        self._rest_vertices = np.asarray(arr["v_template"], dtype=np.float64)
+        self.set_draws(draws)
+
+    def set_draws(self, draws: int) -> "Partition":
+        """Draw the fixed surface sample set anew as `draws` independent sets of n_samples per part (area-weighted
+        on the rest mesh, seeded by `seed`: reproducible, smooth in pose, cheap per forward; draws=1 gives the
+        same set at every call). The fresh samples of `surface_points(v, generator)` come in as many sets.
+        Returns self; ValueError for draws < 1."""
+        if not isinstance(draws, int) or isinstance(draws, bool) or draws < 1:
+            raise ValueError(f"draws={draws!r}: give a positive number of surface sample sets per part (1: one set).")
+        self.draws = draws
+        gen = torch.Generator().manual_seed(self.seed)
+        f_ids, bary = self._draw(torch.as_tensor(self._rest_vertices)[None], gen)
+        self.register_buffer("sample_faces", f_ids[0].to(self.faces.device), persistent=False)
+        self.register_buffer("sample_bary", bary[0].float().to(self.faces.device), persistent=False)
+        return self
 
     @property
     def num_parts(self) -> int:
@@ -217,14 +228,15 @@ class Partition(torch.nn.Module):
 
     # ------------------------------------------------------------------ surface samples
     def _draw(self, vertices: torch.Tensor, generator) -> tuple[torch.Tensor, torch.Tensor]:
-        """Area-weighted face ids (B, K, n) and barycentrics (B, K, n, 3) on each body's own mesh.
+        """Area-weighted face ids (B, K, n) and barycentrics (B, K, n, 3) on each body's own mesh, n = draws *
+        n_samples: `draws` consecutive sets of n_samples, each half on the part's tight faces, half on its extended.
 
         The draws happen on the generator's device (the vertices' device without one), so a seed gives the
         same samples for vertices on any device with a CPU generator, and device-native draws (no host round
         trip) with a generator on the vertices' device; the results are returned on the vertices' device.
         Shape: vertices (B, V, 3) -> face ids (B, K, n) int64, barycentrics (B, K, n, 3) in the vertices' dtype.
         """
-        B = vertices.shape[0]
+        B, D = vertices.shape[0], self.draws
         dev = generator.device if generator is not None else vertices.device
         n_t = self.n_samples // 2
         out_f = []
@@ -233,9 +245,9 @@ class Partition(torch.nn.Module):
             areas = face_areas[:, pad]  # (B, K, L)
             areas = torch.where(mask, areas, torch.zeros_like(areas)).clamp_min(0)
             probs = areas.reshape(B * self.num_parts, -1).to(dev, torch.float64)
-            idx = torch.multinomial(probs, n, replacement=True, generator=generator)
-            out_f.append(torch.gather(pad.to(dev).repeat(B, 1), 1, idx).reshape(B, self.num_parts, n))
-        f_ids = torch.cat(out_f, dim=-1)
+            idx = torch.multinomial(probs, D * n, replacement=True, generator=generator)
+            out_f.append(torch.gather(pad.to(dev).repeat(B, 1), 1, idx).reshape(B, self.num_parts, D, n))
+        f_ids = torch.cat(out_f, dim=-1).reshape(B, self.num_parts, D * self.n_samples)
         bary = uniform_barycentric(f_ids.shape, generator=generator, dtype=torch.float64, device=dev)
         return f_ids.to(vertices.device), bary.to(vertices.device, vertices.dtype)
 
@@ -244,7 +256,8 @@ class Partition(torch.nn.Module):
 
         Without a generator the fixed sample set (drawn once on the rest mesh with `seed`) is used:
         deterministic and smooth in pose. With a generator, fresh area-weighted samples on each posed mesh.
-        Args: vertices (B, V, 3). Returns (B, K, n_samples, 3), differentiable w.r.t. vertices.
+        Args: vertices (B, V, 3). Returns (B, K, draws * n_samples, 3) (`draws` consecutive sets), differentiable
+        w.r.t. vertices.
         """
         B = vertices.shape[0]
         if generator is None:

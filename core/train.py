@@ -72,7 +72,7 @@ from .checkpoint import load_checkpoint
 from .models import model_kind
 from .outputs import exclusive_folder, write_atomic
 from .train_batches import StepProfile, batch_stream, write_profile
-from .train_config import TrainConfig, lr_at, parse_set, read_config_file
+from .train_config import TrainConfig, lr_at, parse_set, read_config_file, same_weights_config
 from .train_state import latest_checkpoint, load_optimizer, read_training_state, save_training_state
 
 
@@ -264,7 +264,7 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
         print(f"--init {init} is not used: --resume continues {out_dir} from its checkpoint {ck.name}", file=sys.stderr)
     if init is not None and ck is None:
         state, cfg_dict, meta = load_checkpoint(init, expected_fingerprint=volume.fingerprint)
-        if cfg_dict != cfg.model.to_dict():
+        if not same_weights_config(cfg_dict, cfg.model):
             raise ValueError(f"{init} holds model config {cfg_dict}, not the training config's {cfg.model.to_dict()}; "
                              f"pass a --config whose 'model' is the checkpoint's (its JSON's meta.training.train_config, "
                              f"which a plain --init uses).")

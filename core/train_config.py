@@ -127,6 +127,17 @@ _REALS = {"lr": (0.0, True), "lr_final": (0.0, True), "sign_tau": (0.0, True), "
           "ema_decay": (0.0, False)}
 
 
+def same_weights_config(held: dict, model) -> bool:
+    """Whether a checkpoint's model config `held` (as stored: keys it lacks take their defaults) describes the
+    weights of `model` (a VolumeConfig or CoapConfig): every field equal but `encoder_draws`, which says how the
+    encoder is run, not what it holds (a phase may train on with more surface sample sets than the one before)."""
+    try:
+        held_cfg = type(model).from_dict(held)
+    except (TypeError, ValueError):   # another kind's config, or keys this release does not know
+        return False
+    return dataclasses.replace(held_cfg, encoder_draws=model.encoder_draws) == model
+
+
 def check_numbers(cfg: "TrainConfig") -> None:
     """ValueError / TypeError in one line for a numeric field of the wrong type, NaN, inf or out of range."""
     for name, least in _INTS.items():

@@ -33,6 +33,7 @@ import torch
 
 from .checkpoint import load_checkpoint, save_checkpoint
 from .outputs import file_sha256
+from .train_config import same_weights_config
 
 STATE_FORMAT = "volsmpl-train-state"
 STATE_VERSION = 2
@@ -204,7 +205,7 @@ def read_training_state(ck: Path, volume, cfg) -> dict:
     doc = verify_state(ck)
     state, _, meta = load_checkpoint(ck / "model", expected_fingerprint=volume.fingerprint)
     saved_cfg = meta["training"]["train_config"]
-    if saved_cfg["model"] != cfg.model.to_dict():
+    if not same_weights_config(saved_cfg["model"], cfg.model):
         raise ValueError(f"{ck} was trained with model config {saved_cfg['model']}, not {cfg.model.to_dict()}; "
                          f"resume with the run's own config ({ck.parent}/config.json).")
     if doc is not None:

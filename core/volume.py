@@ -156,7 +156,7 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
             if center is not None:
                 local = (local - cs[:, :, None]) / ss[:, :, None]
             with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
-                code = self.net.encode(local, parts)
+                code = self.net.encode(local, parts, draws=p.draws)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, center=center,
                         scale=scale, parts=parts, slot=slot)
 
@@ -236,6 +236,13 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         with record_function(DECODER_SCOPE):
             vals = self._decode_xin(enc, xin, b, kc)
         return vals * sc[:, 0] if norm else vals
+
+    def set_encoder_draws(self, draws: int) -> "Volume":
+        """Encode each part as the mean code of `draws` fixed surface sample sets (`Partition.set_draws`; at attach:
+        the checkpoint's `encoder_draws`, 1 for checkpoints without it); returns self. Encodings cached before are
+        not reused (their key holds the sample set). ValueError (one line) for draws < 1."""
+        self.partition.set_draws(draws)
+        return self
 
     def set_precision(self, precision: str) -> "Volume":
         """Set the decoders' arithmetic ('full', 'bf16' or 'tf32'; see the class docstring); returns self.

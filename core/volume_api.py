@@ -51,6 +51,12 @@ class BodyVolume(torch.nn.Module):
                              f"use 'full'")
         return self
 
+    def set_encoder_draws(self, draws: int) -> "BodyVolume":
+        """Set how many surface sample sets the encoder averages over; kinds without an encoder (the exact mesh)
+        refuse any setting (ValueError, one line)."""
+        raise ValueError(f"the {self.kind} volume has no encoder, so encoder draws ({draws!r}) do not apply; drop "
+                         f"the setting for it.")
+
     @property
     def num_parts(self) -> int:
         return self.partition.num_parts

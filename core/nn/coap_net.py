@@ -65,6 +65,7 @@ class CoapConfig(JsonConfig):
         encoder_hidden: ResNet-PointNet width (128).
         encoder_blocks: ResNet-PointNet blocks (4).
         n_surface_samples: surface points per part fed to the encoder (1000).
+        encoder_draws: sets of n_surface_samples per part whose codes are averaged (1; VolumeConfig's).
         box_padding: relative padding of the part boxes (COAP: 1.125 x the tight box).
         query_dims: hidden widths of the query encoder ((256, 256, 256)).
         query_skip: query-encoder layers that read [h, u] / sqrt(2) ((2,)).
@@ -82,6 +83,7 @@ class CoapConfig(JsonConfig):
     encoder_hidden: int = 128
     encoder_blocks: int = 4
     n_surface_samples: int = 1000
+    encoder_draws: int = 1
     box_padding: float = 0.125
     query_dims: Tuple[int, ...] = (256, 256, 256)
     query_skip: Tuple[int, ...] = (2,)
@@ -98,7 +100,8 @@ class CoapConfig(JsonConfig):
             raise ValueError(f"CoapConfig.model must be 'coap', got {self.model!r}")
         for name in ("query_dims", "query_skip", "decoder_dims", "decoder_skip"):
             setattr(self, name, tuple(int(v) for v in getattr(self, name)))
-        for name in ("latent_dim", "encoder_hidden", "encoder_blocks", "n_surface_samples", "query_out"):
+        for name in ("latent_dim", "encoder_hidden", "encoder_blocks", "n_surface_samples", "encoder_draws",
+                     "query_out"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"CoapConfig.{name} must be a positive integer, got {v!r}")
@@ -249,20 +252,17 @@ class CoapNet(nn.Module):
             biases.append(lin.bias + s * (W_hot.t() + z @ W_z.t()))  # (B, K, out)
         return CoapCode(z, tuple(biases), parts)
 
-    def encode(self, local_surface: torch.Tensor, parts: Optional[torch.Tensor] = None) -> CoapCode:
+    def encode(self, local_surface: torch.Tensor, parts: Optional[torch.Tensor] = None, draws: int = 1) -> CoapCode:
         """local_surface (B, K, P, 3) part surface samples in part frames -> CoapCode.
 
-        parts: (K',) int64 ids when local_surface holds only those parts (B, K', P, 3)."""
+        parts: (K',) int64 ids when local_surface holds only those parts (B, K', P, 3).
+        draws: the P samples are `draws` sets, and each part's code is the mean of theirs
+        (ResnetPointNet.encode_parts)."""
         K = self.num_parts if parts is None else check_part_subset(parts, self.num_parts)
         if local_surface.dim() != 4 or local_surface.shape[1] != K or local_surface.shape[-1] != 3:
             raise ValueError(f"CoapNet.encode expects local_surface of shape (B, K={K}, P, 3), "
                              f"got {tuple(local_surface.shape)}")
-        B, K, P, _ = local_surface.shape
-        x = local_surface.reshape(B * K, P, 3)
-        with torch.autocast(x.device.type, dtype=torch.bfloat16,
-                            enabled=self.encoder_bf16 and x.dtype == torch.float32):
-            z = self.encoder(x)
-        z = z.to(local_surface.dtype).reshape(B, K, -1)
+        z = self.encoder.encode_parts(local_surface, draws, self.encoder_bf16)
         return self.fold(z, parts)
 
     # ------------------------------------------------------------------ decoding core

@@ -42,6 +42,10 @@ class VolumeConfig(JsonConfig):
         encoder_hidden: width of the shared ResNet-PointNet encoder (A.1: 128).
         encoder_blocks: number of ResNet blocks in the encoder (A.1: 4).
         n_surface_samples: points sampled per body part fed to the encoder (A.1: 1k).
+        encoder_draws: sets of n_surface_samples per part, each encoded alone; z_k is the mean of their codes
+            (`Partition.set_draws`; not in the paper: 1, the default, is its single set). A set's code varies
+            with where its samples fell, and the SDF with it; the mean of several varies less, at the cost of
+            as many encoder passes (measured in docs/encoder_draws.md).
         decoder_hidden: width of the SDF decoder (A.1: 64).
         decoder_layers: number of linear layers in the decoder, output layer included (A.1: 7).
         skip_layers: indices of decoder layers whose input is concatenated with the decoder
@@ -65,6 +69,7 @@ class VolumeConfig(JsonConfig):
     encoder_hidden: int = 128
     encoder_blocks: int = 4
     n_surface_samples: int = 1000
+    encoder_draws: int = 1
     decoder_hidden: int = 64
     decoder_layers: int = 7
     skip_layers: Tuple[int, ...] = (3,)
@@ -76,7 +81,7 @@ class VolumeConfig(JsonConfig):
 
     def __post_init__(self):
         self.skip_layers = tuple(int(s) for s in self.skip_layers)
-        positive = ("latent_dim", "encoder_hidden", "encoder_blocks", "n_surface_samples",
+        positive = ("latent_dim", "encoder_hidden", "encoder_blocks", "n_surface_samples", "encoder_draws",
                     "decoder_hidden", "decoder_layers")
         for name in positive:
             v = getattr(self, name)

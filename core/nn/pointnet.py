@@ -86,6 +86,27 @@ class ResnetPointNet(nn.Module):
             return torch.cat([self._encode(c) for c in points.split(chunk)])
         return self._encode(points)
 
+    def encode_parts(self, surface: torch.Tensor, draws: int = 1, bf16: bool = False) -> torch.Tensor:
+        """Part codes of B bodies: each part's P points hold `draws` consecutive sets of P / draws samples, each
+        encoded alone, and its code is their mean (`Partition.set_draws`: a code less dependent on where the
+        samples fell). bf16: the encoder under bfloat16 autocast (float32 inputs only); the codes come back in
+        the input's dtype.
+
+        Shape: surface (B, K, P, 3), P a multiple of draws -> (B, K, latent_dim).
+        Example: >>> enc.encode_parts(torch.rand(2, 16, 1024, 3), draws=2).shape   # torch.Size([2, 16, 128])
+        """
+        if surface.dim() != 4:
+            raise ValueError(f"encode_parts expects part samples of shape (B, K, P, 3), got {tuple(surface.shape)}")
+        B, K, P, _ = surface.shape
+        if not isinstance(draws, int) or draws < 1 or P % draws:
+            raise ValueError(f"{P} samples per part do not split into draws={draws!r} equal sets: give a positive "
+                             f"divisor of the samples per part.")
+        x = surface.reshape(B * K * draws, P // draws, surface.shape[-1])
+        with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=bf16 and x.dtype == torch.float32):
+            z = self(x)
+        z = z.to(surface.dtype)
+        return z.reshape(B, K, -1) if draws == 1 else z.reshape(B, K, draws, -1).mean(dim=2)
+
     def _encode(self, points: torch.Tensor) -> torch.Tensor:
         """The architecture of the module docstring, computed with fewer multiplications (same weights, same
         function up to float rounding):

@@ -42,15 +42,12 @@ class VolumetricSMPLNet(nn.Module):
         # AVX512-BF16; used for training throughput, off by default (inference stays float32).
         self.encoder_bf16 = False
 
-    def encode(self, local_surface: torch.Tensor, parts: torch.Tensor | None = None) -> PartCode:
+    def encode(self, local_surface: torch.Tensor, parts: torch.Tensor | None = None, draws: int = 1) -> PartCode:
         """local_surface (B, K, P, 3) part surface samples in part frames -> PartCode.
 
-        parts: (K',) int64 ids when local_surface holds only those parts (B, K', P, 3); the code is then for them."""
-        B, K, P, _ = local_surface.shape
-        x = local_surface.reshape(B * K, P, 3)
-        with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=self.encoder_bf16 and x.dtype == torch.float32):
-            z = self.encoder(x)
-        z = z.to(local_surface.dtype).reshape(B, K, -1)
+        parts: (K',) int64 ids when local_surface holds only those parts (B, K', P, 3); the code is then for them.
+        draws: the P samples are `draws` sets, and z_k is the mean of their codes (ResnetPointNet.encode_parts)."""
+        z = self.encoder.encode_parts(local_surface, draws, self.encoder_bf16)
         return PartCode(z, self.decoder.generate(z, parts))
 
     def decode_dense(self, x_local: torch.Tensor, code: PartCode) -> torch.Tensor:
