@@ -59,11 +59,15 @@ def outside_distance(q: torch.Tensor, q_max: torch.Tensor, absent: torch.Tensor 
 
     Exact and free of overflow for any finite coordinates: with s = min_k max_axis q_k > 0 (every box has an axis
     the point is beyond), min_k ||q_k^+|| = s sqrt(min_k sum((q_k^+ / s)^2)), and the nearest box's ratio is at most
-    sqrt(3), so only farther boxes can overflow (to inf, which the minimum ignores). s is a constant of the
-    gradient (the value does not depend on it), so the gradient is q^+ / ||q^+|| of the nearest box, finite.
+    sqrt(3). A farther box's ratio is capped at 1e18 before squaring: it can never be the nearest, and an overflow
+    to inf would make its zero gradient NaN (0 x inf) in the backward pass. s is a constant of the gradient (the
+    value does not depend on it), so the gradient is q^+ / ||q^+|| of the nearest box, finite.
+    A row with some q_max <= 0 lies in or on a box: a caller whose box test found it in none computed q in another
+    rounding (a point within rounding of a face). Its distance is 0 with a gradient of 0, not the NaN gradient of a
+    norm at 0.
     absent: (F, K) bool parts that do not count (their distance is +inf; all absent gives +inf).
 
-    Shape: q (F, K, 3), q_max (F, K), both with every q_max > 0 where not absent -> (F,).
+    Shape: q (F, K, 3), q_max (F, K) -> (F,).
 
     Example:
         >>> q, q_max = box_excess(torch.tensor([[[3.0, 0.0, 4.0]]]), torch.zeros(1, 1, 3))
@@ -75,13 +79,16 @@ def outside_distance(q: torch.Tensor, q_max: torch.Tensor, absent: torch.Tensor 
                          f"{tuple(q_max.shape)}")
     if absent is not None:
         q_max = torch.where(absent, float("inf"), q_max)
-    s = q_max.amin(dim=-1, keepdim=True).detach()                       # (F, 1), > 0
-    w = q.clamp(min=0.0) / s[..., None]
+    s = q_max.amin(dim=-1, keepdim=True).detach()                       # (F, 1), > 0 for points in no box
+    touching = s[:, 0] <= 0                                             # in or on a box, by this rounding
+    s = torch.where(s > 0, s, torch.ones_like(s))
+    w = (q.clamp(min=0.0) / s[..., None]).clamp(max=1e18)
     w = w * w
     r2 = w[..., 0] + w[..., 1] + w[..., 2]                              # (F, K), >= 1 at the nearest box
     if absent is not None:
         r2 = torch.where(absent, float("inf"), r2)
-    return s[:, 0] * r2.amin(dim=-1).sqrt()
+    r2 = torch.where(touching, torch.ones_like(s[:, 0]), r2.amin(dim=-1))
+    return torch.where(touching, torch.zeros_like(s[:, 0]), s[:, 0] * r2.sqrt())
 
 
 def transform_points(T: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
