@@ -139,15 +139,16 @@ def test_outside_distance_far_points_and_gradient():
 
 
 def test_outside_distance_gradient_stays_finite_at_rounding_edges():
-    # a point 1e-25 beyond box 0's face: box 1's ratio (1 / 1e-25)^2 overflows float32; its zero gradient stayed NaN
-    q = torch.tensor([[[1e-25, -0.05, -0.05], [1.0, 1.0, 1.0]],
+    # a point 1e-39 m beyond box 0's face: box 1's ratio 1 / 1e-39 overflows float32 to inf, and its zero gradient
+    # became NaN (0 x inf)
+    q = torch.tensor([[[1e-39, -0.05, -0.05], [1.0, 1.0, 1.0]],
                       [[0.3, -0.1, 0.4], [0.2, 0.2, -0.5]]], requires_grad=True)
     q_max = q.detach().amax(-1)
     d = outside_distance(q, q_max)
     (g,) = torch.autograd.grad(d.sum(), q)
     assert torch.isfinite(g).all()
     ref = torch.stack([qk.double().clamp(min=0).norm(dim=-1).min() for qk in q.detach()])
-    torch.testing.assert_close(d.double(), ref, rtol=1e-6, atol=1e-30)
+    torch.testing.assert_close(d.double(), ref, rtol=1e-6, atol=1e-44)
     torch.testing.assert_close(g[0], torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]))     # away from the near face
     torch.testing.assert_close(g[1, 1], torch.tensor([0.2, 0.2, 0.0]) / 0.2 / 2 ** 0.5)    # box 1 is nearer there
     # a point its caller found in no box but whose q, computed in another rounding, puts it on box 0: distance 0
