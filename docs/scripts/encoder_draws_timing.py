@@ -1,0 +1,54 @@
+"""Encoding time of a checkpoint by number of encoder draws (`Volume.set_encoder_draws`): docs/encoder_draws.md.
+
+    python docs/scripts/encoder_draws_timing.py [--checkpoint core/assets/volsmpl_anny] [--model volsmpl]
+                                                 [--draws 1 4 8] [--batch 1 8] [--repeats 7] [--threads 1]
+
+Each row: the median wall time of `repeats` fresh encodings (frames, boxes, surface samples, PointNet, the part
+codes; `Volume.encode(out, fresh=True)`) of the first B validation bodies, after 2 untimed ones, under
+torch.no_grad(). Run it on a quiet machine: times only compare within one run.
+"""
+import argparse
+import json
+import statistics
+import time
+
+import torch
+
+from volsmpl.attach import attach_volume
+from volsmpl.body.model import create_body
+from volsmpl.validation import VAL_SEED, validation_bodies
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--checkpoint", default=None, help="checkpoint (default: the shipped one of --model)")
+    p.add_argument("--model", default="volsmpl", choices=["volsmpl", "coap"])
+    p.add_argument("--draws", type=int, nargs="+", default=[1, 4, 8])
+    p.add_argument("--batch", type=int, nargs="+", default=[1, 8])
+    p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--threads", type=int, default=1)
+    args = p.parse_args()
+    torch.set_num_threads(args.threads)
+    body = create_body()
+    vol = attach_volume(body, checkpoint=args.checkpoint, model=args.model)
+    rows = {}
+    for B in args.batch:
+        bodies = {k: v[:B] for k, v in validation_bodies(B, VAL_SEED, num_betas=body.num_betas).items()}
+        with torch.no_grad():
+            out = body(**bodies)
+            for D in args.draws:
+                vol.set_encoder_draws(D)
+                for _ in range(2):
+                    vol.encode(out, fresh=True)
+                times = []
+                for _ in range(args.repeats):
+                    t0 = time.perf_counter()
+                    vol.encode(out, fresh=True)
+                    times.append(1e3 * (time.perf_counter() - t0))
+                rows[f"B{B}_D{D}"] = round(statistics.median(times), 1)
+                print(f"B = {B}, D = {D}: {rows[f'B{B}_D{D}']} ms", flush=True)
+    print(json.dumps(rows))
+
+
+if __name__ == "__main__":
+    main()
