@@ -10,12 +10,12 @@ torch.no_grad(). Run it on a quiet machine: times only compare within one run.
 import argparse
 import json
 import statistics
-import time
 
 import torch
 
 from volsmpl.attach import attach_volume
 from volsmpl.body.model import create_body
+from volsmpl.meter import timed_ms
 from volsmpl.validation import VAL_SEED, validation_bodies
 
 
@@ -38,13 +38,9 @@ def main():
             out = body(**bodies)
             for D in args.draws:
                 vol.set_encoder_draws(D)
-                for _ in range(2):
-                    vol.encode(out, fresh=True)
-                times = []
-                for _ in range(args.repeats):
-                    t0 = time.perf_counter()
-                    vol.encode(out, fresh=True)
-                    times.append(1e3 * (time.perf_counter() - t0))
+                encode = lambda: vol.encode(out, fresh=True)
+                timed_ms([encode] * 2, out.vertices.device)                      # untimed warm-up
+                times = timed_ms([encode] * args.repeats, out.vertices.device)
                 rows[f"B{B}_D{D}"] = round(statistics.median(times), 1)
                 print(f"B = {B}, D = {D}: {rows[f'B{B}_D{D}']} ms", flush=True)
     print(json.dumps(rows))
