@@ -87,6 +87,8 @@ class EvalConfig:
             bbox_padding does not apply, the boxes are the models' 12.5 %).
         encoder_draws: surface sample sets whose codes the encoder averages (`Volume.set_encoder_draws`) during
             the evaluation; None (default): the checkpoint's own (1 unless it was trained with more).
+        refine_steps: test-time refinement of the part codes on the posed mesh's own surface
+            (`Volume.set_code_refinement`, volsmpl.code_refinement) during the evaluation; 0 (default): none.
     """
 
     n_bodies: int = 64
@@ -108,6 +110,7 @@ class EvalConfig:
     precision: str = "full"
     sampling: str = "body"
     encoder_draws: Optional[int] = None
+    refine_steps: int = 0
 
     def __post_init__(self):
         for name in ("n_bodies", "n_points", "batch_size", "timing_repeats"):
@@ -127,6 +130,8 @@ class EvalConfig:
             raise ValueError(f"EvalConfig.bbox_padding={self.bbox_padding}: give a finite padding >= 0 in metres (0.05).")
         if self.encoder_draws is not None and (not isinstance(self.encoder_draws, int) or self.encoder_draws < 1):
             raise ValueError(f"--encoder-draws {self.encoder_draws}: give a positive number of surface sample sets.")
+        if not isinstance(self.refine_steps, int) or isinstance(self.refine_steps, bool) or self.refine_steps < 0:
+            raise ValueError(f"--refine-steps {self.refine_steps}: give an integer >= 0 (0: no code refinement).")
         if self.sampling not in SAMPLINGS:
             raise ValueError(f"EvalConfig.sampling={self.sampling!r}: use one of {', '.join(SAMPLINGS)}.")
         n_surf = int(round(self.n_points * self.surface_fraction))
@@ -252,6 +257,10 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
     if cfg.encoder_draws is not None:
         draws_before = volume.partition.draws
         volume.set_encoder_draws(cfg.encoder_draws)   # ValueError for a volume without an encoder
+    refine_before = None
+    if cfg.refine_steps:
+        refine_before = volume.refine_steps
+        volume.set_code_refinement(cfg.refine_steps)  # ValueError for a volume without part codes
     try:
         if volume.is_sdf:
             res = evaluate(lambda out, pts: volume.query(out, pts), bodies=bodies, body=body, config=cfg, name=name)
@@ -263,6 +272,8 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
             volume.set_precision(before)
         if draws_before is not None:
             volume.set_encoder_draws(draws_before)
+        if refine_before is not None:
+            volume.set_code_refinement(refine_before)
     if not volume.is_sdf:
         for k in [k for k in res.metrics if k.startswith("mse")]:  # not distances: no SDF error to report
             res.metrics[k] = None
@@ -381,6 +392,10 @@ def add_parser(sub):
     p.add_argument("--encoder-draws", type=int, default=None,
                    help="encode each part as the mean code of this many fixed surface sample sets (default: the "
                         "checkpoint's own, 1 unless trained with more); more sets, steadier codes, slower encoding")
+    p.add_argument("--refine-steps", type=int, default=0,
+                   help="refine each body's part codes by this many optimiser steps on the posed mesh's own surface "
+                        "before querying (volsmpl.code_refinement; default 0: the encoder's codes); each step costs "
+                        "about half an encoding")
     p.add_argument("--out", default=None, help="write the results as JSON here")
     p.add_argument("--split", default="all", choices=["standard", "self_contact", "all"],
                    help="validation split: the standard set, the self-contact poses (volsmpl.contact_split: min(n-bodies, "
@@ -408,7 +423,7 @@ def run(args) -> int:
                      device=args.device, timing=args.timing, timing_repeats=args.repeats, cache_dir=args.cache_dir,
                      use_cache=not args.no_cache, timing_threads=args.threads, gt_sign=args.gt_sign,
                      precision=args.precision, sampling=args.sampling, surface_sigma=args.surface_sigma,
-                     encoder_draws=args.encoder_draws)
+                     encoder_draws=args.encoder_draws, refine_steps=args.refine_steps)
     init = {"config": {}, "init_seed": 0} if args.random_init else None
     if args.split == "self_contact":
         from .contact_split import evaluate_self_contact

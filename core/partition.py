@@ -251,6 +251,15 @@ class Partition(torch.nn.Module):
         bary = uniform_barycentric(f_ids.shape, generator=generator, dtype=torch.float64, device=dev)
         return f_ids.to(vertices.device), bary.to(vertices.device, vertices.dtype)
 
+    def tight_samples(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The fixed sample set's points on each part's own (tight) faces: the first half of each of the `draws`
+        sets (`_draw`'s layout). Shape: -> face ids (K, draws * n_t) int64, barycentrics (K, draws * n_t, 3),
+        n_t = n_samples // 2."""
+        n_t = self.n_samples // 2
+        idx = (torch.arange(self.draws, device=self.sample_faces.device)[:, None] * self.n_samples
+               + torch.arange(n_t, device=self.sample_faces.device)).reshape(-1)
+        return self.sample_faces[:, idx], self.sample_bary[:, idx]
+
     def surface_points(self, vertices: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
         """Per-part surface samples of posed bodies (world frame).
 

@@ -22,6 +22,7 @@ import torch
 from torch.profiler import record_function
 
 from .boxes import inside_boxes, near_boxes, part_normalization
+from .code_refinement import check_refine_steps, refine_codes, refinement_points
 from .collision import reduce_penetration
 from .encode_graph import EncodeGraphs
 from .encoding import Encoding, EncodingCache
@@ -102,6 +103,7 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         self.decoder_evaluations = 0  # (point, part) decoder evaluations so far, for tests and benchmarks
         self.kind = kind_of_network(net)  # the registry's name of this model ('volsmpl', 'coap')
         self.set_precision(precision)
+        self.refine_steps = 0   # set_code_refinement
         self.cuda_graphs = bool(cuda_graphs)
         self.encode_graphs = EncodeGraphs()  # the captured encodes (used when cuda_graphs is on)
         self.cuda_graph_queries = bool(cuda_graph_queries)
@@ -130,8 +132,9 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
 
     def _replays(self, out) -> bool:
         """Whether the encode of `out` (with the fixed surface samples) is a CUDA-graph replay: cuda_graphs on, a
-        CUDA output, autograd off (EncodeGraphs.supports); a key whose capture failed is then encoded eagerly."""
-        return self.cuda_graphs and self.encode_graphs.supports(out)
+        CUDA output, autograd off (EncodeGraphs.supports), no code refinement; a key whose capture failed is then
+        encoded eagerly."""
+        return self.cuda_graphs and not self.refine_steps and self.encode_graphs.supports(out)
 
     def _encode_eager(self, out, generator, parts: torch.Tensor | None = None, frames=None,
                       code_grad: bool = True) -> Encoding:
@@ -157,6 +160,10 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
                 local = (local - cs[:, :, None]) / ss[:, :, None]
             with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
                 code = self.net.encode(local, parts, draws=p.draws)
+                if self.refine_steps and generator is None and not self.training:
+                    xin, target, sc = refinement_points(p, v, Gs, cs, ss, parts)
+                    code = self.net.code_from_z(refine_codes(self.net, code.z, xin, target, sc, parts,
+                                                             self.refine_steps), parts)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, center=center,
                         scale=scale, parts=parts, slot=slot)
 
@@ -242,6 +249,14 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         the checkpoint's `encoder_draws`, 1 for checkpoints without it); returns self. Encodings cached before are
         not reused (their key holds the sample set). ValueError (one line) for draws < 1."""
         self.partition.set_draws(draws)
+        return self
+
+    def set_code_refinement(self, steps: int) -> "Volume":
+        """Refine each fresh encoding's part codes by `steps` Adam steps on the posed mesh's own surface
+        (volsmpl.code_refinement; 0, the default: the encoder's codes as they are); returns self. Not while
+        training, nor on training's fresh surface draws. Encodings cached before are not reused (their key holds
+        the setting). ValueError (one line) for steps < 0."""
+        self.refine_steps = check_refine_steps(steps)
         return self
 
     def set_precision(self, precision: str) -> "Volume":

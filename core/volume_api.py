@@ -57,6 +57,12 @@ class BodyVolume(torch.nn.Module):
         raise ValueError(f"the {self.kind} volume has no encoder, so encoder draws ({draws!r}) do not apply; drop "
                          f"the setting for it.")
 
+    def set_code_refinement(self, steps: int) -> "BodyVolume":
+        """Set the test-time refinement of the part codes; kinds without codes (the exact mesh) refuse any setting
+        (ValueError, one line)."""
+        raise ValueError(f"the {self.kind} volume has no part codes, so code refinement ({steps!r} steps) does not "
+                         f"apply; drop the setting for it.")
+
     @property
     def num_parts(self) -> int:
         return self.partition.num_parts

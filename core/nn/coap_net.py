@@ -252,6 +252,10 @@ class CoapNet(nn.Module):
             biases.append(lin.bias + s * (W_hot.t() + z @ W_z.t()))  # (B, K, out)
         return CoapCode(z, tuple(biases), parts)
 
+    def code_from_z(self, z: torch.Tensor, parts: Optional[torch.Tensor] = None) -> CoapCode:
+        """The CoapCode of given codes z (B, K', latent) of `parts` (None: all K): `fold`."""
+        return self.fold(z, parts)
+
     def encode(self, local_surface: torch.Tensor, parts: Optional[torch.Tensor] = None, draws: int = 1) -> CoapCode:
         """local_surface (B, K, P, 3) part surface samples in part frames -> CoapCode.
 

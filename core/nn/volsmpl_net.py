@@ -50,6 +50,10 @@ class VolumetricSMPLNet(nn.Module):
         z = self.encoder.encode_parts(local_surface, draws, self.encoder_bf16)
         return PartCode(z, self.decoder.generate(z, parts))
 
+    def code_from_z(self, z: torch.Tensor, parts: torch.Tensor | None = None) -> PartCode:
+        """The PartCode of given codes z (B, K', latent) of `parts` (None: all K): their generated decoder weights."""
+        return PartCode(z, self.decoder.generate(z, parts))
+
     def decode_dense(self, x_local: torch.Tensor, code: PartCode) -> torch.Tensor:
         """x_local (B, K, N, 3) -> (B, K, N): every part's decoder on every point."""
         return self.decoder.decode_dense(x_local, code.weights)
