@@ -2,7 +2,7 @@
 encoder gives them, against codes fitted to that body (the decoders fixed).
 
     python docs/scripts/code_oracle.py --checkpoint runs/volsmpl_b8q_gpu/ckpt-00051000/model \
-        [--bodies 0,8,16,24,32,40,48,56] [--steps 150] [--lr 3e-3] [--draws 4] [--fit exact|surface]
+        [--bodies 0,8,16,24,32,40,48,56] [--steps 150] [--lr 3e-3] [--draws 4] [--fit exact|surface|parts]
         [--train-step S] [--out code_oracle.json]
 
 For each chosen validation body (standard split, `volsmpl eval`'s bodies) the codes z (K, latent) start from the
@@ -20,7 +20,8 @@ then scored on the evaluation's own points (same seed, same ground truth as `vol
 along the face normal by t ~ N(0, (3 mm)^2), target SDF t (first order; wrong only where another surface is within
 a few mm). `--train-step S` takes the bodies of training step S's batch (`train_batches.make_batch`, the run's
 config; a step the run has not reached is a fresh draw of the training distribution) instead of validation bodies,
-scored on `validation.query_points` of those bodies.
+scored on `validation.query_points` of those bodies. `--fit parts` fits each part's own decoder on its own faces'
+points (the form `volsmpl.code_refinement` uses, which other parts overlapping it cannot mislead).
 
 If the fitted codes score far above the encoder's, the decoders can represent the body and the encoder's codes
 are what limits the accuracy; if they score near it, the decoders (their width, the NBW rank) are the limit.
@@ -164,7 +165,7 @@ def main():
         for step in range(args.steps):
             opt.zero_grad(set_to_none=True)
             if args.fit == "parts":
-                pred = vol._decode_xin(with_code(vol, enc, z), xin, torch.zeros_like(kk), kk) * sc
+                pred = vol.net.decode_pairs(xin, torch.zeros_like(kk), kk, with_code(vol, enc, z).code) * sc
                 loss, _ = sdf_loss(pred[None], fg[None], tcfg)
             else:
                 loss, _ = sdf_loss(vol.query_encoded(with_code(vol, enc, z), fp), fg, tcfg)

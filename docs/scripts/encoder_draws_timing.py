@@ -1,10 +1,11 @@
-"""Encoding time of a checkpoint by number of encoder draws (`Volume.set_encoder_draws`): docs/encoder_draws.md.
+"""Encoding time of a checkpoint by number of encoder draws (`Volume.set_encoder_draws`, docs/encoder_draws.md) and
+of code refinement steps (`Volume.set_code_refinement`, docs/code_refinement.md).
 
     python docs/scripts/encoder_draws_timing.py [--checkpoint core/assets/volsmpl_anny] [--model volsmpl]
-                                                 [--draws 1 4 8] [--batch 1 8] [--repeats 7] [--threads 1]
+                                                 [--draws 1 4 8] [--refine 0] [--batch 1 8] [--repeats 7] [--threads 1]
 
 Each row: the median wall time of `repeats` fresh encodings (frames, boxes, surface samples, PointNet, the part
-codes; `Volume.encode(out, fresh=True)`) of the first B validation bodies, after 2 untimed ones, under
+codes, their refinement; `Volume.encode(out, fresh=True)`) of the first B validation bodies, after 2 untimed ones, under
 torch.no_grad(). Run it on a quiet machine: times only compare within one run.
 """
 import argparse
@@ -24,6 +25,7 @@ def main():
     p.add_argument("--checkpoint", default=None, help="checkpoint (default: the shipped one of --model)")
     p.add_argument("--model", default="volsmpl", choices=["volsmpl", "coap"])
     p.add_argument("--draws", type=int, nargs="+", default=[1, 4, 8])
+    p.add_argument("--refine", type=int, nargs="+", default=[0], help="code refinement steps")
     p.add_argument("--batch", type=int, nargs="+", default=[1, 8])
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--threads", type=int, default=1)
@@ -38,11 +40,14 @@ def main():
             out = body(**bodies)
             for D in args.draws:
                 vol.set_encoder_draws(D)
-                encode = lambda: vol.encode(out, fresh=True)
-                timed_ms([encode] * 2, out.vertices.device)                      # untimed warm-up
-                times = timed_ms([encode] * args.repeats, out.vertices.device)
-                rows[f"B{B}_D{D}"] = round(statistics.median(times), 1)
-                print(f"B = {B}, D = {D}: {rows[f'B{B}_D{D}']} ms", flush=True)
+                for R in args.refine:
+                    vol.set_code_refinement(R)
+                    encode = lambda: vol.encode(out, fresh=True)
+                    timed_ms([encode] * 2, out.vertices.device)                  # untimed warm-up
+                    times = timed_ms([encode] * args.repeats, out.vertices.device)
+                    name = f"B{B}_D{D}" + (f"_R{R}" if R else "")
+                    rows[name] = round(statistics.median(times), 1)
+                    print(f"B = {B}, D = {D}, R = {R}: {rows[name]} ms", flush=True)
     print(json.dumps(rows))
 
 
