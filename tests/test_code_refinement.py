@@ -146,3 +146,19 @@ def test_coap_refinement_fits_its_occupancy():
             occ = vol.query(out, pts)
         ious.append(float(compute_metrics(vol.level - occ, gt, surf)["iou_surf"]))
     assert ious[1] > ious[0] + 0.01, ious
+
+
+@pytest.mark.cuda
+def test_cuda_refinement_matches_the_cpu(shipped):
+    body, _, params, out = shipped
+    pts = out.vertices[:, ::200] + 0.003
+    cpu = attach_volume(create_body()).set_code_refinement(10)
+    with torch.no_grad():
+        ref = cpu.query(out, pts)
+    gbody = create_body().to("cuda")
+    gvol = attach_volume(gbody).set_code_refinement(10)
+    with torch.no_grad():
+        gout = gbody(**{k: v.to("cuda") for k, v in params.items()})
+        got = gvol.query(gout, pts.to("cuda")).cpu()
+    # float32 on another device: the ten steps round otherwise; a wrong device path would be off by millimetres
+    assert torch.allclose(got, ref, atol=2e-4, rtol=0), (got - ref).abs().max()

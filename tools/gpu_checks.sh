@@ -46,7 +46,7 @@ case "${1:-}" in
 session)  # the engine's CUDA paths first (tests), then its figures; each step bounded so that the call ends in ~9 min
     step pytest_cuda 90 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
         tests/test_encode_graph.py tests/test_query_graph.py tests/test_partition.py tests/test_train.py tests/test_train_state.py tests/test_groundtruth.py \
-        tests/test_contact_training.py
+        tests/test_contact_training.py tests/test_code_refinement.py
     step bench_cuda 220 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,coap \
         --batch 1 8 --points 60000 --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody \
         --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
@@ -71,7 +71,10 @@ checks)
 bench)  # each (model, batch) runs in a fresh process (~20 s with CUDA start and profiling): keep the set small
     step bench_cuda 330 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,volsmpl-tf32,volsmpl-dense,coap --batch 1 8 --points 60000 \
         --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
-    cp "$W/bench_cuda.log" "$OUT"/ ;;
+    cp "$W/bench_cuda.log" "$OUT"/
+    step refine_cost 60 python3 docs/scripts/encoder_draws_timing.py --device cuda --draws 1 4 --refine 0 20 40 80 \
+        --batch 1 8 --repeats 5   # encoder draws and code refinement on the device (docs/code_refinement.md)
+    cat "$W"/refine_cost.log > "$OUT/refine_cost.log" 2>/dev/null ;;
 apps)  # the interaction database is built on the CPU side of that machine first (no open3d needed)
     step hoi_make_db 150 $V hoi make-db --seed 0
     step hoi_cuda 150 $V hoi --device cuda --model volsmpl,coap,mesh --cases 4 --render 1 --out "$W/hoi"

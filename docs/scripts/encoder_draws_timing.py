@@ -3,6 +3,7 @@ of code refinement steps (`Volume.set_code_refinement`, docs/code_refinement.md)
 
     python docs/scripts/encoder_draws_timing.py [--checkpoint core/assets/volsmpl_anny] [--model volsmpl]
                                                  [--draws 1 4 8] [--refine 0] [--batch 1 8] [--repeats 7] [--threads 1]
+                                                 [--device cpu|cuda]
 
 Each row: the median wall time of `repeats` fresh encodings (frames, boxes, surface samples, PointNet, the part
 codes, their refinement; `Volume.encode(out, fresh=True)`) of the first B validation bodies, after 2 untimed ones, under
@@ -29,13 +30,15 @@ def main():
     p.add_argument("--batch", type=int, nargs="+", default=[1, 8])
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
     args = p.parse_args()
     torch.set_num_threads(args.threads)
     body = create_body()
     vol = attach_volume(body, checkpoint=args.checkpoint, model=args.model)
+    body, vol = body.to(args.device), vol.to(args.device)
     rows = {}
     for B in args.batch:
-        bodies = {k: v[:B] for k, v in validation_bodies(B, VAL_SEED, num_betas=body.num_betas).items()}
+        bodies = {k: v[:B].to(args.device) for k, v in validation_bodies(B, VAL_SEED, num_betas=body.num_betas).items()}
         with torch.no_grad():
             out = body(**bodies)
             for D in args.draws:
