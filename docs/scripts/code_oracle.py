@@ -101,8 +101,8 @@ def main():
     ap.add_argument("--lr", type=float, default=3e-3)
     ap.add_argument("--draws", type=int, default=4)
     ap.add_argument("--fit", choices=("exact", "surface", "parts"), default="exact")
-    ap.add_argument("--fit-points", type=int, default=30000, help="points of --fit surface")
-    ap.add_argument("--fit-sigma", type=float, default=0.003, help="offsets of --fit surface, metres")
+    ap.add_argument("--fit-points", type=int, default=30000, help="points of --fit surface / parts")
+    ap.add_argument("--fit-sigma", type=float, default=0.003, help="offsets of --fit surface / parts, metres")
     ap.add_argument("--train-step", type=int, default=None)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=None)
@@ -115,19 +115,18 @@ def main():
         p.requires_grad_(False)
     cfg = EvalConfig()
     ids = [int(s) for s in args.bodies.split(",")]
-    if args.train_step is None:
-        allb = validation_bodies(cfg.n_bodies, cfg.seed)
-    else:
-        from volsmpl.train_batches import make_batch
-        allb = {k: v.float() for k, v in make_batch(tcfg, body, vol.partition, args.train_step)["params"].items()}
-        allb["betas"] = allb["betas"][:, :body.num_betas]
     if args.train_step is None:   # the evaluation's points and (cached) ground truth of all bodies, then the chosen
+        allb = validation_bodies(cfg.n_bodies, cfg.seed)
         verts = pose_bodies(body, allb)
         points, is_surface = evaluation_points(body, allb, verts, cfg)
         gt = ground_truth(verts, body.faces, points, cfg.gt_sign, cfg.gt_nsamples)
         verts, points, gt = verts[ids], points[ids], gt[ids]
-    bodies = {k: v[ids] for k, v in allb.items()}
-    if args.train_step is not None:
+        bodies = {k: v[ids] for k, v in allb.items()}
+    else:
+        from volsmpl.train_batches import make_batch
+        allb = {k: v.float() for k, v in make_batch(tcfg, body, vol.partition, args.train_step)["params"].items()}
+        allb["betas"] = allb["betas"][:, :body.num_betas]
+        bodies = {k: v[ids] for k, v in allb.items()}
         verts = pose_bodies(body, bodies)
         points, is_surface = query_points(verts, body.faces, cfg.n_points, cfg.seed)
         gt = ground_truth(verts, body.faces, points, cfg.gt_sign, cfg.gt_nsamples)
