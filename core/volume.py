@@ -159,11 +159,11 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
             if center is not None:
                 local = (local - cs[:, :, None]) / ss[:, :, None]
             with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
-                code = self.net.encode(local, parts, draws=p.draws)
+                z = self.net.encode_z(local, parts, draws=p.draws)
                 if self.refine_steps and generator is None and not self.training:
                     xin, target, sc = refinement_points(p, v, Gs, cs, ss, parts)
-                    code = self.net.code_from_z(refine_codes(self.net, code.z, xin, target, sc, parts,
-                                                             self.refine_steps), parts)
+                    z = refine_codes(self.net, z, xin, target, sc, parts, self.refine_steps)
+                code = self.net.code_from_z(z, parts)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, center=center,
                         scale=scale, parts=parts, slot=slot)
 

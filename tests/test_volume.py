@@ -690,8 +690,8 @@ def test_selfpen_encodes_only_overlapping_parts_with_full_values_and_gradients(m
     from volsmpl.apps.selfpen.cases import load_cases
     case = load_cases(names=["knee_into_chest"])[0]
     encoded = []
-    enc = vol.net.encode
-    vol.net.encode = lambda local, *a, **kw: encoded.append(local.shape[1]) or enc(local, *a, **kw)
+    enc = vol.net.encode_z
+    vol.net.encode_z = lambda local, *a, **kw: encoded.append(local.shape[1]) or enc(local, *a, **kw)
     res = []
     for full in (False, True):
         pose = case.body_pose[None].clone().requires_grad_(True)
@@ -715,8 +715,8 @@ def test_selfpen_rigid_code_gradient():
     from volsmpl.apps.selfpen.cases import load_cases
     case = load_cases(names=["hand_behind_into_buttock"])[0]
     seen = []
-    enc = vol.net.encode
-    vol.net.encode = lambda local, *a, **kw: seen.append(torch.is_grad_enabled()) or enc(local, *a, **kw)
+    enc = vol.net.encode_z
+    vol.net.encode_z = lambda local, *a, **kw: seen.append(torch.is_grad_enabled()) or enc(local, *a, **kw)
 
     def loss_grad(pose, code_grad, queried=False):
         pose = pose.clone().requires_grad_(True)
@@ -753,8 +753,8 @@ def test_queries_encode_only_parts_holding_points(model):
     b = volsmpl.create_body().to(torch.float64)
     vol = volsmpl.attach_volume(b, model=model).eval().to(torch.float64)
     encoded = []
-    enc = vol.net.encode
-    vol.net.encode = lambda local, *a, **kw: encoded.append(local.shape[1]) or enc(local, *a, **kw)
+    enc = vol.net.encode_z
+    vol.net.encode_z = lambda local, *a, **kw: encoded.append(local.shape[1]) or enc(local, *a, **kw)
     p = {k: v.to(torch.float64) for k, v in random_pose(1, seed=21).items()}
     hand = torch.nonzero(vol.partition.vertex_labels == vol.partition.table.part_names.index("right_hand"))[:, 0]
     g = torch.Generator().manual_seed(0)

@@ -257,17 +257,20 @@ class CoapNet(nn.Module):
         return self.fold(z, parts)
 
     def encode(self, local_surface: torch.Tensor, parts: Optional[torch.Tensor] = None, draws: int = 1) -> CoapCode:
-        """local_surface (B, K, P, 3) part surface samples in part frames -> CoapCode.
+        """local_surface (B, K, P, 3) part surface samples in part frames -> CoapCode: `code_from_z(encode_z(...))`.
 
         parts: (K',) int64 ids when local_surface holds only those parts (B, K', P, 3).
         draws: the P samples are `draws` sets, and each part's code is the mean of theirs
         (ResnetPointNet.encode_parts)."""
+        return self.code_from_z(self.encode_z(local_surface, parts, draws), parts)
+
+    def encode_z(self, local_surface: torch.Tensor, parts: Optional[torch.Tensor] = None, draws: int = 1) -> torch.Tensor:
+        """The codes z (B, K', latent) alone, as `encode` makes them (no biases folded)."""
         K = self.num_parts if parts is None else check_part_subset(parts, self.num_parts)
         if local_surface.dim() != 4 or local_surface.shape[1] != K or local_surface.shape[-1] != 3:
             raise ValueError(f"CoapNet.encode expects local_surface of shape (B, K={K}, P, 3), "
                              f"got {tuple(local_surface.shape)}")
-        z = self.encoder.encode_parts(local_surface, draws, self.encoder_bf16)
-        return self.fold(z, parts)
+        return self.encoder.encode_parts(local_surface, draws, self.encoder_bf16)
 
     # ------------------------------------------------------------------ decoding core
     def _check_code(self, code: CoapCode) -> Tuple[int, int]:

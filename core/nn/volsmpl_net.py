@@ -43,12 +43,15 @@ class VolumetricSMPLNet(nn.Module):
         self.encoder_bf16 = False
 
     def encode(self, local_surface: torch.Tensor, parts: torch.Tensor | None = None, draws: int = 1) -> PartCode:
-        """local_surface (B, K, P, 3) part surface samples in part frames -> PartCode.
+        """local_surface (B, K, P, 3) part surface samples in part frames -> PartCode: `code_from_z(encode_z(...))`.
 
         parts: (K',) int64 ids when local_surface holds only those parts (B, K', P, 3); the code is then for them.
         draws: the P samples are `draws` sets, and z_k is the mean of their codes (ResnetPointNet.encode_parts)."""
-        z = self.encoder.encode_parts(local_surface, draws, self.encoder_bf16)
-        return PartCode(z, self.decoder.generate(z, parts))
+        return self.code_from_z(self.encode_z(local_surface, parts, draws), parts)
+
+    def encode_z(self, local_surface: torch.Tensor, parts: torch.Tensor | None = None, draws: int = 1) -> torch.Tensor:
+        """The codes z (B, K', latent) alone, as `encode` makes them (no decoder weights generated)."""
+        return self.encoder.encode_parts(local_surface, draws, self.encoder_bf16)
 
     def code_from_z(self, z: torch.Tensor, parts: torch.Tensor | None = None) -> PartCode:
         """The PartCode of given codes z (B, K', latent) of `parts` (None: all K): their generated decoder weights."""
