@@ -247,7 +247,8 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
              (["--w", "mesh=x"], "weights must be numbers"),
              (["--published-cost"], "add coap to --model"),
              (["--batch", "0"], "--batch must be >= 1"),
-             (["--checkpoint-coap", "x"], "coap is not in --model")]
+             (["--checkpoint-coap", "x"], "coap is not in --model"),
+             (["--encoder-bf16"], "runs none: add volsmpl or coap")]
     for extra, msg in cases:
         assert main(["motion", "--model", "mesh", "--out", out] + extra) == 2
         err = capsys.readouterr().err.strip()
@@ -364,6 +365,28 @@ def test_resume_recomputes_a_sequence_made_with_another_body(tmp_path, monkeypat
     monkeypatch.setattr(volsmpl, "create_body", taller_body)
     assert main(argv) == 0
     assert case.read_text() != first  # recomputed, not reused
+
+
+def test_encoder_bf16_reaches_both_learned_encoders_and_the_record_keys(tmp_path, monkeypatch):
+    """--encoder-bf16: the PointNet of every learned kind runs under bfloat16 autocast (seen at its calls), the run
+    says so in its config, and a sequence stored from a float32 run is recomputed under it, not reused."""
+    from volsmpl.cli import main
+    from volsmpl.nn.pointnet import ResnetPointNet
+    seen = []
+    encode = ResnetPointNet.encode_parts
+    monkeypatch.setattr(ResnetPointNet, "encode_parts",
+                        lambda self, surface, draws=1, bf16=False: seen.append(bf16) or encode(self, surface, draws, bf16))
+    out = tmp_path / "motion"
+    argv = ["motion", "--model", "volsmpl,coap", "--w", "coap=0.1", "--scenes", "1", "--sequences", "1", "--frames",
+            "6", "--iters", "1", "--cost-frames", "1", "--cost-repeats", "1", "--render", "0", "--threads", "1",
+            "--out", str(out), "--resume"]
+    assert main(argv) == 0 and seen and not any(seen)
+    first = {p.name: p.read_text() for p in (out / "cases").glob("*.json")}
+    seen.clear()
+    assert main(argv + ["--encoder-bf16"]) == 0 and seen and all(seen)
+    assert json.loads((out / "results.json").read_text())["config"]["encoder_bf16"] is True
+    again = {p.name: p.read_text() for p in (out / "cases").glob("*.json")}
+    assert len(again) == len(first) == 2 and all(again[n] != first[n] for n in first)
 
 
 @pytest.mark.slow
