@@ -95,6 +95,29 @@ def test_bad_input_gets_one_line(tmp_path, capsys, tiny_ckpt):
     assert "not an egohmr checkpoint" in capsys.readouterr().err
     assert main(["egohmr", "sample", "--scale", "volsmpl=abc", "--checkpoint", str(ckpt), "--out", str(tmp_path / "o")]) == 2
     assert "not a number" in capsys.readouterr().err
+    assert main(["egohmr", "sample", "--guide", "none,mesh", "--encoder-bf16", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "has none: add volsmpl or coap" in err and "\n" not in err
+    assert main(["egohmr", "train", "--encoder-bf16", "--out", str(tmp_path / "o")]) == 2
+    assert "applies to sample and tune, not train" in capsys.readouterr().err
+
+
+def test_encoder_bf16_reaches_the_learned_guides_encoders(tmp_path, tiny_ckpt, monkeypatch):
+    """sample --encoder-bf16: every PointNet call of the learned guides runs under bfloat16 autocast, and the
+    result says so; without it none does."""
+    from volsmpl.nn.pointnet import ResnetPointNet
+    ckpt, _ = tiny_ckpt
+    seen = []
+    encode = ResnetPointNet.encode_parts
+    monkeypatch.setattr(ResnetPointNet, "encode_parts",
+                        lambda self, surface, draws=1, bf16=False: seen.append(bf16) or encode(self, surface, draws, bf16))
+    for flag in ([], ["--encoder-bf16"]):
+        seen.clear()
+        out = tmp_path / f"out{len(flag)}"
+        assert main(["egohmr", "sample", "--guide", "volsmpl,coap", "--frames", "1", "--checkpoint", str(ckpt),
+                     "--out", str(out), "--render", "0", "--batch", "1", "--no-max-batch"] + flag) == 0
+        assert seen and all(b == bool(flag) for b in seen)
+        assert json.loads((out / "results.json").read_text())["encoder_bf16"] is bool(flag)
 
 
 def test_user_frame_of_another_resolution_is_refused(tmp_path):

@@ -49,6 +49,10 @@ def add_parser(sub):
     p.add_argument("--wrt", default="denoised", choices=["denoised", "noisy"], help="pose J is evaluated at")
     p.add_argument("--joints", default="all", choices=["all", "legs"], help="joints the gradient moves")
     p.add_argument("--reduce", default="mean", choices=["mean", "code"], help="J's reduction (see guidance.py)")
+    p.add_argument("--encoder-bf16", action="store_true",
+                   help="sample/tune: run the learned guides' part encoder (most of a guided step's cost) under "
+                        "bfloat16 autocast, both kinds alike: faster on a CPU with AVX512-BF16 or AMX (emulated and "
+                        "slower on one without), codes rounded; default float32")
     p.add_argument("--batch", type=int, default=16, help="frames sampled together")
     p.add_argument("--budget-mb", type=float, default=2048.0, help="memory budget of the measured largest batch")
     p.add_argument("--no-max-batch", action="store_true", help="skip measuring the largest batch")
@@ -111,6 +115,15 @@ def run(args) -> int:
         raise ValueError(f"--batch must be >= 1, got {args.batch}")
     if args.frames is not None and args.frames < 1:
         raise ValueError(f"--frames must be >= 1, got {args.frames}")
+    if args.encoder_bf16:
+        from volsmpl.models import model_kind
+
+        if args.action not in ("sample", "tune"):
+            raise ValueError(f"--encoder-bf16 sets the guides' encoder arithmetic: it applies to sample and tune, "
+                             f"not {args.action}; drop it")
+        if not any(g != "none" and model_kind(g).learned for g in parse_guides(args.guide)):
+            raise ValueError(f"--encoder-bf16 sets the learned guides' encoder arithmetic, but --guide {args.guide} "
+                             f"has none: add volsmpl or coap, or drop the flag")
     if args.action == "make-data":
         from .data import make_frames
 

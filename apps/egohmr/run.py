@@ -42,10 +42,17 @@ def _setup(args, split: str):
     return body, net, meta, frames, prep, scenes
 
 
-def _volume(guide: str, device="cpu"):
+def _volume(guide: str, device="cpu", encoder_bf16: bool = False):
+    """The guide's volume (None for 'none'); a learned one's part encoder under bfloat16 autocast with encoder_bf16."""
     import volsmpl
+    from volsmpl.models import model_kind
 
-    return None if guide == "none" else volsmpl.attach_volume(volsmpl.create_body(), model=guide).to(device)
+    if guide == "none":
+        return None
+    vol = volsmpl.attach_volume(volsmpl.create_body(), model=guide).to(device)
+    if model_kind(guide).learned:
+        vol.net.encoder_bf16 = encoder_bf16
+    return vol
 
 
 def run_sample(args) -> int:
@@ -72,7 +79,7 @@ def run_sample(args) -> int:
           f"{reg['mpjpe_invisible_mm']:.1f})  collision {reg['collision_ratio']:.4f}")
     for g in guides:
         opts = options_of(args, scales[g])
-        vol = _volume(g, args.device)
+        vol = _volume(g, args.device, args.encoder_bf16)
         recs = sample_frames(net, body, frames, prep, vol, opts, batch=args.batch, seed=args.seed, scenes=scenes)
         s = summarize(recs)
         s["sample_batch"] = args.batch
@@ -90,7 +97,7 @@ def run_sample(args) -> int:
         for r, rec in zip(records[g], recs):
             r["_pose"] = rec["pose"]
         result = {"split": args.split, "frames": len(frames), "seed": args.seed, "guides": guides, "scales": scales,
-                  "options": options, "regressor": reg, "budget_mb": args.budget_mb, "max_batch": batches, "summary": summary,
+                  "options": options, "encoder_bf16": args.encoder_bf16, "regressor": reg, "budget_mb": args.budget_mb, "max_batch": batches, "summary": summary,
                   "paper": paper.rows("egohmr"), "checkpoint": args.checkpoint or "apps/egohmr/egohmr_anny",
                   "checkpoint_meta": {k: meta.get(k) for k in ("step", "validation", "train_frames", "seconds")},
                   "cases": {k: [{kk: vv for kk, vv in r.items() if kk != "_pose"} for r in v] for k, v in records.items()},
@@ -153,7 +160,7 @@ def run_tune(args) -> int:
     print(f"none     MPJPE {base['mpjpe_mm']:.1f}  collision {base['collision_ratio']:.4f}")
     best = {}
     for g in guides:
-        vol = _volume(g, args.device)
+        vol = _volume(g, args.device, args.encoder_bf16)
         cands = []
         for f in factors:
             a = PAPER_SCALE[g] * f
@@ -165,7 +172,8 @@ def run_tune(args) -> int:
         best[g] = min(ok or cands, key=lambda c: (c[1]["collision_ratio"], c[1]["mpjpe_mm"]))[0]
     doc = {"split": split, "frames": len(frames), "rule": f"lowest collision ratio with MPJPE within "
            f"{TUNE_MPJPE_SLACK_MM} mm of the unguided sampler's", "factors": factors,
-           "paper_scales": PAPER_SCALE, "rows": rows, "best": best, "meta": machine_info(args.device)}
+           "paper_scales": PAPER_SCALE, "encoder_bf16": args.encoder_bf16, "rows": rows, "best": best,
+           "meta": machine_info(args.device)}
     write_atomic(path, json.dumps(doc, indent=1))
     print(f"best scales {best}; wrote {path}")
     return 0
@@ -230,7 +238,7 @@ def run_user_frame(args) -> int:
     summary, panels = {}, []
     cam = camera_of(frame.K, frame.image_size)
     for g in guides:
-        vol = _volume(g, dev)
+        vol = _volume(g, dev, args.encoder_bf16)
         t0 = time.perf_counter()
         x, _ = draw(net, body, d, vol, options_of(args, scales[g]), seed=args.seed)
         secs = time.perf_counter() - t0
@@ -252,7 +260,7 @@ def run_user_frame(args) -> int:
               f"{secs:.2f} s")
     save_png(out / f"frame_{frame.name}.png", grid([p[0] for p in panels], [p[1] for p in panels], cols=2))
     doc = {"frame": str(args.frame), "scene": str(args.scene), "units": args.units, "up": args.up, "guides": guides,
-           "scales": scales, "summary": summary, "pelvis": centre.tolist(), "figures": {frame.name: f"frame_{frame.name}.png"},
+           "scales": scales, "encoder_bf16": args.encoder_bf16, "summary": summary, "pelvis": centre.tolist(), "figures": {frame.name: f"frame_{frame.name}.png"},
            "checkpoint": args.checkpoint or "apps/egohmr/egohmr_anny", "meta": machine_info(args.device)}
     write_atomic(out / "results.json", json.dumps(doc, indent=1))
     print(f"wrote {out / 'results.json'}")
