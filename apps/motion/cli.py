@@ -75,7 +75,7 @@ def add_parser(sub):
     p.add_argument("--encoder-bf16", action="store_true",
                    help="run the learned kinds' part encoder (the PointNet, most of the collision term's cost) under "
                         "bfloat16 autocast, both kinds alike: ~1.7x faster per frame on a CPU with AVX512-BF16 or AMX "
-                        "(emulated and slower on one without), codes rounded (README, apps/motion); default float32")
+                        "(emulated, not timed, on one without), codes rounded (README, apps/motion); default float32")
     p.add_argument("--protocol", default="paper", choices=["paper", "tuned"],
                    help="'paper' (default): every weight on every room (Tables 5 and D.1; rows <model>_test add the "
                         "tuning split's view); 'tuned': the weights swept on every third room only, each model's "
