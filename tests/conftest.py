@@ -54,6 +54,22 @@ def host_reads(monkeypatch):
     return reads
 
 
+@pytest.fixture
+def encoder_bf16_calls(monkeypatch):
+    """The `bf16` argument of every PointNet encoding (`ResnetPointNet.encode_parts`), in call order: whether it ran
+    under bfloat16 autocast. Returns the list (clear it before the code under test)."""
+    from volsmpl.nn.pointnet import ResnetPointNet
+
+    calls = []
+    encode = ResnetPointNet.encode_parts
+
+    def spied(self, surface, draws=1, bf16=False):
+        calls.append(bf16)
+        return encode(self, surface, draws, bf16)
+    monkeypatch.setattr(ResnetPointNet, "encode_parts", spied)
+    return calls
+
+
 def random_pose(B: int, scale: float = 0.4, seed: int = 0, dtype=torch.float32, num_betas: int = 10):
     g = torch.Generator().manual_seed(seed)
     return dict(

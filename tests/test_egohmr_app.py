@@ -102,15 +102,11 @@ def test_bad_input_gets_one_line(tmp_path, capsys, tiny_ckpt):
     assert "applies to sample and tune, not train" in capsys.readouterr().err
 
 
-def test_encoder_bf16_reaches_the_learned_guides_encoders(tmp_path, tiny_ckpt, monkeypatch):
+def test_encoder_bf16_reaches_the_learned_guides_encoders(tmp_path, tiny_ckpt, encoder_bf16_calls):
     """sample --encoder-bf16: every PointNet call of the learned guides runs under bfloat16 autocast, and the
     result says so; without it none does."""
-    from volsmpl.nn.pointnet import ResnetPointNet
     ckpt, _ = tiny_ckpt
-    seen = []
-    encode = ResnetPointNet.encode_parts
-    monkeypatch.setattr(ResnetPointNet, "encode_parts",
-                        lambda self, surface, draws=1, bf16=False: seen.append(bf16) or encode(self, surface, draws, bf16))
+    seen = encoder_bf16_calls
     for flag in ([], ["--encoder-bf16"]):
         seen.clear()
         out = tmp_path / f"out{len(flag)}"

@@ -367,15 +367,11 @@ def test_resume_recomputes_a_sequence_made_with_another_body(tmp_path, monkeypat
     assert case.read_text() != first  # recomputed, not reused
 
 
-def test_encoder_bf16_reaches_both_learned_encoders_and_the_record_keys(tmp_path, monkeypatch):
+def test_encoder_bf16_reaches_both_learned_encoders_and_the_record_keys(tmp_path, encoder_bf16_calls):
     """--encoder-bf16: the PointNet of every learned kind runs under bfloat16 autocast (seen at its calls), the run
     says so in its config, and a sequence stored from a float32 run is recomputed under it, not reused."""
     from volsmpl.cli import main
-    from volsmpl.nn.pointnet import ResnetPointNet
-    seen = []
-    encode = ResnetPointNet.encode_parts
-    monkeypatch.setattr(ResnetPointNet, "encode_parts",
-                        lambda self, surface, draws=1, bf16=False: seen.append(bf16) or encode(self, surface, draws, bf16))
+    seen = encoder_bf16_calls
     out = tmp_path / "motion"
     argv = ["motion", "--model", "volsmpl,coap", "--w", "coap=0.1", "--scenes", "1", "--sequences", "1", "--frames",
             "6", "--iters", "1", "--cost-frames", "1", "--cost-repeats", "1", "--render", "0", "--threads", "1",
