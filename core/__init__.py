@@ -6,10 +6,10 @@
     out = body(body_pose=...)
     sdf = body.volume.query(out, points)
 """
-from .body.model import Body, BodyOutput, create_body
-from .partition import Partition
-from .attach import attach_volume
-from .volume import Volume
+from volsmpl.body.model import Body, BodyOutput, create_body
+from volsmpl.body.partition import Partition
+from volsmpl.volume.attach import attach_volume
+from volsmpl.volume.learned import Volume
 
 __all__ = ["Body", "BodyOutput", "create_body", "Partition", "Volume", "attach_volume"]
 __version__ = "0.1.0"

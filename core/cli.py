@@ -11,20 +11,20 @@ import os
 import sys
 import traceback
 
-from .deps import MissingDependency
+from volsmpl.runtime.deps import MissingDependency
 
 # subcommand name -> (module providing add_parser(subparsers) and run(args), one-line summary for --help)
 SUBCOMMANDS = {
-    "bench": ("volsmpl.bench", "time / memory / accuracy benchmark: VolumetricSMPL vs COAP vs winding numbers"),
+    "bench": ("volsmpl.bench.run", "time / memory / accuracy benchmark: VolumetricSMPL vs COAP vs winding numbers"),
     "body": ("volsmpl.body.cli", "export / inspect / pose the default body"),
     "demo": ("volsmpl.demo", "pose the default body; meshes, part picture, SDF slice and surfaces"),
-    "eval": ("volsmpl.evaluate", "evaluate a checkpoint on the validation set (paper Table 1 columns)"),
-    "report": ("volsmpl.report", "write docs/report.md: every result table beside the paper's numbers"),
+    "eval": ("volsmpl.evaluation.cli", "evaluate a checkpoint on the validation set (paper Table 1 columns)"),
+    "report": ("volsmpl.report.build", "write docs/report.md: every result table beside the paper's numbers"),
     "motion": ("volsmpl.apps.motion.cli", "scene-constrained walking: VolumetricSMPL vs COAP vs exact mesh (paper Table 5, D.1)"),
     "egohmr": ("volsmpl.apps.egohmr.cli", "egocentric body recovery, collision-guided diffusion: VolumetricSMPL vs COAP vs exact mesh (paper Table 4)"),
     "hoi": ("volsmpl.apps.hoi.cli", "human-object joint optimisation: VolumetricSMPL vs COAP vs exact mesh (paper Table 3)"),
     "selfpen": ("volsmpl.apps.selfpen.cli", "repair self-intersections by pose optimisation (paper Table 6)"),
-    "train": ("volsmpl.train", "train the volumetric model on the default body (resumable; torchrun for DDP)"),
+    "train": ("volsmpl.train.loop", "train the volumetric model on the default body (resumable; torchrun for DDP)"),
 }
 
 
@@ -71,7 +71,7 @@ def main(argv=None) -> int:
     try:
         args = build_parser(command if command in SUBCOMMANDS else "").parse_args(argv)
         if getattr(args, "device", None) is not None:  # every --device: runs there, or one line why not
-            from .devices import check_device
+            from volsmpl.runtime.devices import check_device
             check_device(args.device)
         return int(args._run(args) or 0)
     except SystemExit:  # argparse (usage line + error, exit 2; --help exit 0) and explicit exits

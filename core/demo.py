@@ -22,11 +22,11 @@ def run(args) -> int:
     import torch
     import trimesh
 
-    from .body.model import create_body
-    from .body.poses import named_pose
-    from .partition import Partition
-    from .outputs import check_writable
-    from .render import grid, part_palette, render_mesh, save_png
+    from volsmpl.body.model import create_body
+    from volsmpl.body.poses import named_pose
+    from volsmpl.body.partition import Partition
+    from volsmpl.io.outputs import check_writable
+    from volsmpl.viz.render import grid, part_palette, render_mesh, save_png
 
     out_dir = check_writable(args.out, "dir", "--out")
     (out_dir / "poses").mkdir(parents=True, exist_ok=True)
@@ -51,11 +51,11 @@ def run(args) -> int:
 def _volume_pictures(args, body, out_dir: Path) -> None:
     import torch
 
-    from .body.poses import named_pose
-    from .render import save_png
-    from .slice_view import sdf_slice, surfaces_side_by_side
-    from .attach import attach_volume
-    from .models import model_kind
+    from volsmpl.body.poses import named_pose
+    from volsmpl.viz.render import save_png
+    from volsmpl.viz.slice_view import sdf_slice, surfaces_side_by_side
+    from volsmpl.volume.attach import attach_volume
+    from volsmpl.volume.models import model_kind
 
     ckpt = args.checkpoint
     if ckpt is None and not model_kind("volsmpl").default_checkpoint.with_suffix(".safetensors").exists():

@@ -19,7 +19,7 @@ def pytest_collection_modifyitems(config, items):
 def pytest_runtest_setup(item):
     """A test that needs the shipped checkpoint fails (not skips) when the file is missing."""
     if item.get_closest_marker("needs_checkpoint") is not None:
-        from volsmpl.models import model_kind
+        from volsmpl.volume.models import model_kind
         path = model_kind("volsmpl").default_checkpoint.with_suffix(".safetensors")
         if not path.exists():
             pytest.fail(f"the shipped checkpoint {path} is missing: restore it (git checkout core/assets) before "

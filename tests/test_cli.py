@@ -38,7 +38,7 @@ def test_user_errors_exit_2(tmp_path, capsys):
 
 def test_demo_with_checkpoint_writes_sdf_slice(tmp_path):
     import volsmpl
-    from volsmpl.checkpoint import save_checkpoint
+    from volsmpl.io.checkpoint import save_checkpoint
     from volsmpl.nn.config import VolumeConfig
     cfg = VolumeConfig(latent_dim=16, encoder_hidden=16, encoder_blocks=2, n_surface_samples=64, decoder_hidden=16, nbw_rank=2)
     vol = volsmpl.attach_volume(volsmpl.create_body(), pretrained=False, config=cfg)

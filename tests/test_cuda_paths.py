@@ -102,7 +102,7 @@ def test_device_cuda_without_cuda_is_one_line(tmp_path, capsys, command):
 
 
 def test_check_device_names():
-    from volsmpl.devices import check_device
+    from volsmpl.runtime.devices import check_device
     assert check_device("cpu") == torch.device("cpu")
     with pytest.raises(ValueError, match="not a device name"):
         check_device("gpu0")

@@ -12,7 +12,7 @@ import torch
 import volsmpl
 from volsmpl import cli
 from volsmpl.cli import main
-from volsmpl.outputs import check_writable, write_atomic
+from volsmpl.io.outputs import check_writable, write_atomic
 
 
 def one_line(capsys) -> str:
@@ -82,7 +82,7 @@ def test_cli_debug_shows_the_traceback(fake_command, capsys, monkeypatch, how):
 
 def test_cli_real_subcommand_internal_error_has_no_traceback(monkeypatch, capsys):
     """A bug inside a real subcommand (an AttributeError escaping `body info`) no longer escapes main."""
-    import volsmpl.partition as partition
+    import volsmpl.body.partition as partition
 
     def broken(*a, **k):
         raise AttributeError("'Body' object has no attribute 'oops'")
@@ -120,7 +120,7 @@ def test_check_writable_and_write_atomic(tmp_path):
 
 
 def test_bench_out_checked_before_the_benchmark(tmp_path, monkeypatch, capsys):
-    import volsmpl.bench as bench
+    import volsmpl.bench.run as bench
     monkeypatch.setattr(bench, "run_bench", lambda *a, **k: pytest.fail("the benchmark ran before the --out check"))
     afile = tmp_path / "file.txt"
     afile.write_text("x")
@@ -159,7 +159,8 @@ def test_selfpen_results_written_atomically():
 
 
 def test_report_uses_the_shared_write_atomic():
-    from volsmpl import outputs, report
+    from volsmpl.io import outputs
+    from volsmpl.report import build as report
     assert report.write_atomic is outputs.write_atomic
 
 
@@ -176,7 +177,7 @@ def test_attach_volume_refuses_a_non_body(bad):
 def test_attach_volume_refuses_an_argument_it_would_ignore(tiny_config, model):
     """checkpoint=... with pretrained=False gave random weights, the checkpoint unread; config=... with the
     pretrained default was replaced by the checkpoint's own: both silently. Both are refused in one line."""
-    from volsmpl.models import model_kind
+    from volsmpl.volume.models import model_kind
     kind = model_kind(model)
     b = volsmpl.create_body()
     with pytest.raises(ValueError, match="pretrained=False would give random weights") as e:

@@ -11,7 +11,7 @@ import torch
 import volsmpl
 from volsmpl.cli import main
 from volsmpl.nn.analytic import box_sdf
-from volsmpl.train_config import TrainConfig
+from volsmpl.train.config import TrainConfig
 
 
 @pytest.mark.parametrize("field,value,error", [

@@ -1,10 +1,10 @@
-"""docs/contact_poses.png: 12 training self-contact poses (volsmpl.body.contact_poses, seed 5, mean shape), their
-contact vertices (volsmpl.contact_regions) in red. Run: python tools/contact_poses_figure.py"""
+"""docs/contact_poses.png: 12 training self-contact poses (volsmpl.body.poses, seed 5, mean shape), their
+contact vertices (volsmpl.body.contact_regions) in red. Run: python tools/contact_poses_figure.py"""
 import numpy as np, torch, volsmpl
-from volsmpl.body.contact_poses import sample_contact_euler
+from volsmpl.body.poses import sample_contact_euler
 from volsmpl.body.poses import euler_to_body_pose
-from volsmpl.contact_regions import contact_vertices
-from volsmpl.render import render_mesh, grid, save_png
+from volsmpl.body.contact_regions import contact_vertices
+from volsmpl.viz.render import render_mesh, grid, save_png
 torch.set_num_threads(1)
 body = volsmpl.create_body()
 pose = euler_to_body_pose(sample_contact_euler(12, seed=5))

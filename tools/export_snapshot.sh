@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Export the committed package (core + apps) at a commit into DIR, for a long CLI job that must not see later edits
-# of the checkout (its per-case records are keyed by the source it runs: volsmpl.case_store):
+# of the checkout (its per-case records are keyed by the source it runs: volsmpl.io.case_store):
 #     tools/export_snapshot.sh DIR [COMMIT]      # default COMMIT: HEAD
 #     PYTHONPATH=DIR python -m volsmpl.cli motion ... --resume
 # The same commit exported again (another session) gives the same source digest, so --resume continues its

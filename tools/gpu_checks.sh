@@ -45,8 +45,8 @@ step() {  # step NAME TIMEOUT CMD...: run with a wall-clock limit, log to $W/NAM
 case "${1:-}" in
 session)  # the engine's CUDA paths first (tests), then its figures; each step bounded so that the call ends in ~9 min
     step pytest_cuda 90 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
-        tests/test_encode_graph.py tests/test_query_graph.py tests/test_partition.py tests/test_train.py tests/test_train_state.py tests/test_groundtruth.py \
-        tests/test_contact_training.py tests/test_code_refinement.py
+        tests/volume/engine/test_encode_graph.py tests/volume/engine/test_query_graph.py tests/body/test_partition.py tests/train/test_loop.py tests/train/test_state.py tests/geometry/test_groundtruth.py \
+        tests/train/test_contact_training.py tests/volume/test_code_refinement.py
     step bench_cuda 220 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,coap \
         --batch 1 8 --points 60000 --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody \
         --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
@@ -64,7 +64,7 @@ session)  # the engine's CUDA paths first (tests), then its figures; each step b
     cat "$W"/*.log > "$OUT/session.log" ;;
 checks)
     step pytest_cuda 170 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
-        tests/test_encode_graph.py tests/test_query_graph.py tests/test_egohmr_app.py tests/test_groundtruth.py tests/test_partition.py tests/test_train.py tests/test_train_state.py
+        tests/volume/engine/test_encode_graph.py tests/volume/engine/test_query_graph.py tests/apps/egohmr/test_app.py tests/geometry/test_groundtruth.py tests/body/test_partition.py tests/train/test_loop.py tests/train/test_state.py
     step selfpen_cuda 120 $V selfpen --device cuda --model volsmpl,coap,mesh --render 2 --out "$W/selfpen"
     cp "$W"/*.log "$OUT"/ 2>/dev/null
     tar czf "$OUT/checks.tgz" -C "$W" . ;;
@@ -120,8 +120,8 @@ train)
         split -b 15M -d "$OUT/run.tar" "$OUT/run.tar." && rm "$OUT/run.tar"
     fi ;;
 batch)  # ~60 s: the batch maker's device paths against the CPU, the step's breakdown and a profile of one batch
-    step pytest_batch 60 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_groundtruth.py \
-        tests/test_contact_training.py
+    step pytest_batch 60 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/geometry/test_groundtruth.py \
+        tests/train/test_contact_training.py
     step gt_profile 120 python3 tools/gt_profile.py --config checkpoints/volsmpl_b8q.json --device cuda \
         --backends torch --steps 3 --trace
     cp "$W/pytest_batch.log" "$W/gt_profile.log" "$OUT"/ ;;

@@ -21,11 +21,11 @@ from pathlib import Path
 
 import torch
 
-from volsmpl.attach import attach_volume
+from volsmpl.volume.attach import attach_volume
 from volsmpl.body.model import create_body
-from volsmpl.train import TrainStep
-from volsmpl.train_batches import batch_stream
-from volsmpl.train_config import TrainConfig
+from volsmpl.train.loop import TrainStep
+from volsmpl.train.batches import batch_stream
+from volsmpl.train.config import TrainConfig
 
 
 def main(argv=None) -> int:
@@ -97,8 +97,8 @@ def trace_ground_truth(cfg: TrainConfig, body, partition, dev: torch.device) -> 
     times, so that a GPU's batch shows whether its time goes to device work or to the host issuing it."""
     from torch.profiler import ProfilerActivity, profile
 
-    from volsmpl.groundtruth import batch_sdf
-    from volsmpl.train_batches import make_batch
+    from volsmpl.geometry.groundtruth import batch_sdf
+    from volsmpl.train.batches import make_batch
 
     cfg = dataclasses.replace(cfg, gt_backend="torch", num_workers=0)
     if body.v_template.device != dev:   # as batch_stream: a copy of the body on the device, its volume shared

@@ -22,8 +22,8 @@ def main() -> int:
     from volsmpl.apps.hoi import database as db
     from volsmpl.apps.hoi.cli import select_cases
     from volsmpl.apps.hoi.fit import FitConfig, fit_cases
-    from volsmpl.outputs import write_atomic
-    from volsmpl.provenance import machine_info
+    from volsmpl.io.outputs import write_atomic
+    from volsmpl.io.provenance import machine_info
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--cases", type=int, default=13)

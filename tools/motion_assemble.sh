@@ -8,7 +8,7 @@
 # by the code that made them, so the assembly runs from the same export and reuses every record. Then:
 #   1. results.json and the figures from the export (all records reused; COAP as published measured once), copied
 #      to docs/motion/;
-#   2. the chained re-run check (volsmpl.result_check.chain_check): two sequences of rooms 0 and 1 (COAP at w = 0.1,
+#   2. the chained re-run check (volsmpl.report.result_check.chain_check): two sequences of rooms 0 and 1 (COAP at w = 0.1,
 #      VolumetricSMPL, the mesh), made here by the export (the table's own code) and by the current code, compared
 #      (VERIFY_TOL=1e-5 in the environment for code whose backward pass sums in another order: README, "Results say").
 #      The walks take 1 Adam step, not the table's 100: the optimisation amplifies float rounding (the table's own

@@ -106,7 +106,7 @@ def options_of(args, scale: float):
 
 
 def run(args) -> int:
-    from volsmpl.devices import check_device
+    from volsmpl.runtime.devices import check_device
 
     check_device(args.device)
     if args.threads:
@@ -116,7 +116,7 @@ def run(args) -> int:
     if args.frames is not None and args.frames < 1:
         raise ValueError(f"--frames must be >= 1, got {args.frames}")
     if args.encoder_bf16:
-        from volsmpl.models import model_kind
+        from volsmpl.volume.models import model_kind
 
         if args.action not in ("sample", "tune"):
             raise ValueError(f"--encoder-bf16 sets the guides' encoder arithmetic: it applies to sample and tune, "

@@ -138,10 +138,10 @@ def regressor_and_sample_errors(net, body, frames, seed: int = 0) -> dict:
 def max_batch(net, body, frame_prep: dict, volume, opts: GuideOptions, budget_mb: float, device="cpu",
               cap: int = 128, also: tuple = ()) -> dict:
     """The largest batch whose guided sampling step (denoiser + collision gradient) stays within `budget_mb`
-    of peak memory, measured (volsmpl.meter) by doubling from 1 up to `cap`, then bisecting. frame_prep: one
+    of peak memory, measured (volsmpl.runtime.meter) by doubling from 1 up to `cap`, then bisecting. frame_prep: one
     prepared frame (batch of 1) replicated; `also`: further batch sizes to measure (e.g. the run's).
     Returns {'max_batch', 'measured_mb': {batch: peak MB}, 'capped'}."""
-    from volsmpl.meter import Meter, malloc_trim
+    from volsmpl.runtime.meter import Meter, malloc_trim
 
     measured = {}
 

@@ -23,7 +23,7 @@ def camera_of(K: np.ndarray, image_size) -> "object":
 
 
 def _panel(scene, camera, body_vertices, faces, color, points=None, keypoints=None, title=""):
-    from volsmpl.render import render_camera_view
+    from volsmpl.viz.render import render_camera_view
 
     meshes = [(np.asarray(scene.vertices), np.asarray(scene.faces), (0.78, 0.76, 0.72))]
     if body_vertices is not None:
@@ -39,7 +39,7 @@ def frame_figure(path, frame, scene, gt_vertices, samples: dict, faces: np.ndarr
 
     samples: guide -> sampled vertices (V, 3) camera frame; inside: guide -> scene points inside that sample (M, 3).
     """
-    from volsmpl.render import grid, save_png
+    from volsmpl.viz.render import grid, save_png
 
     cam = camera_of(frame.K, frame.image_size)
     panels = [_panel(scene, cam, gt_vertices, faces, BODY_GT, keypoints=np.asarray(frame.joints),

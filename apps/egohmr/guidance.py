@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import torch
 
-from volsmpl.boxes import inside_boxes
-from volsmpl.partition import Partition
+from volsmpl.geometry.boxes import inside_boxes
+from volsmpl.body.partition import Partition
 
 from .pose import leg_mask, pose_body
 

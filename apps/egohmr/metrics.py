@@ -6,8 +6,8 @@
 - `collision_ratio`: fraction of the frame's scene points (the 2 x 2 m cube around the body used for guidance)
   inside the predicted body mesh, by the exact winding-number test (the same test for every guide, so rows compare);
 - `contact`: whether a body vertex lies within 2 cm of the scene mesh (exact distance: open3d's BVH, or
-  `volsmpl.mesh_query.MeshQuery` on the faces near the body where open3d does not import) or inside one of its
-  closed components (integer winding number >= 1 by `volsmpl.mesh_distance.winding_numbers`: exact float64 signed
+  `volsmpl.geometry.triangle_queries.MeshQuery` on the faces near the body where open3d does not import) or inside one of its
+  closed components (integer winding number >= 1 by `volsmpl.geometry.point_mesh_distance.winding_numbers`: exact float64 signed
   crossings for a scene of several components; float32 ray casts call some open-air points inside where they touch).
 
     e = mpjpe(pred_joints, gt_joints)                  # (B, 24) mm
@@ -19,9 +19,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from volsmpl import deps
-from volsmpl.mesh_distance import winding_numbers
-from volsmpl.mesh_query import MeshQuery
+from volsmpl.runtime import deps
+from volsmpl.geometry.point_mesh_distance import winding_numbers
+from volsmpl.geometry.triangle_queries import MeshQuery
 
 
 def mpjpe(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:

@@ -15,7 +15,7 @@ Every placement is checked exactly (`penetration`, room_checks.py: winding numbe
 torch's MeshQuery where they do not import): no body vertex inside a closed scene component and no scene point
 (the room's vertices and its dense surface sample `room_cloud`, 1 point per cm²) inside the posed body, deeper
 than PEN_TOL; the support parts (SUPPORT) within CONTACT_TOL of their support.
-A placement that fails is drawn again. Conventions: world Y up, metres; body frame as `apps/hoi/rig.py` (facing +Z).
+A placement that fails is drawn again. Conventions: world Y up, metres; body frame as `core/body/rig.py` (facing +Z).
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from volsmpl.apps.hoi.rig import Rig, jitter, named_euler, set_joints
+from volsmpl.body.rig import Rig, jitter, named_euler, set_joints
 from volsmpl.body.poses import BODY_JOINTS, euler_to_body_pose
 from volsmpl.body.shapes import sample_betas
 from .room_checks import BodyMesh, load_room, penetration, room_cloud, surface_distance
@@ -170,7 +170,7 @@ def _standing_euler(rng) -> np.ndarray:
 def _floor_activity(ctx: _Ctx, rng, activity: str) -> Placement | None:
     G = np.eye(3)
     if activity == "walking":
-        from volsmpl.apps.motion.gait import walk_cycle
+        from volsmpl.body.gait import walk_cycle
         orient, pose = walk_cycle(torch.tensor([rng.uniform(0.0, 1.0)], dtype=torch.float64))
         G = Rotation.from_rotvec(orient[0].numpy()).as_matrix()
         body_pose = pose[0].numpy()

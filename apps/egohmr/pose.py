@@ -14,7 +14,7 @@ from __future__ import annotations
 import torch
 
 from volsmpl.body.lbs import rigid_chain, shape_blend
-from volsmpl.rotations import axis_angle_to_rotation_6d, rotation_6d_to_axis_angle, rotation_6d_to_matrix
+from volsmpl.geometry.rotations import axis_angle_to_rotation_6d, rotation_6d_to_axis_angle, rotation_6d_to_matrix
 
 NUM_JOINTS = 24
 POSE_DIM = NUM_JOINTS * 6

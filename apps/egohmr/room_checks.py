@@ -8,7 +8,7 @@
   (`BodyMesh`: winding numbers counted along 3 rays, open3d); `surface_distance`: the smallest distance to a mesh.
 
 Where open3d does not import (e.g. a CUDA machine without it), the ray counts and distances are those of
-`volsmpl.mesh_query.MeshQuery` (exact integer winding numbers by signed ray crossings, exact float64 distances,
+`volsmpl.geometry.triangle_queries.MeshQuery` (exact integer winding numbers by signed ray crossings, exact float64 distances,
 torch on the CPU); where libigl does not import, an item's inside test is MeshQuery's winding number >= 1, which
 equals libigl's generalised winding number > 1/2 off the surface of a closed item. The answers agree with open3d's
 and libigl's up to open3d's float32 distances (~1e-7 m).
@@ -20,9 +20,9 @@ from functools import lru_cache
 import numpy as np
 import torch
 
-from volsmpl import deps
-from volsmpl.groundtruth import raycasting_scene
-from volsmpl.mesh_query import MeshQuery
+from volsmpl.runtime import deps
+from volsmpl.geometry.groundtruth import raycasting_scene
+from volsmpl.geometry.triangle_queries import MeshQuery
 from volsmpl.scene import cached, code_version, make_room, sample_surface
 
 CLOUD_DENSITY = 1e4  # room_cloud: points per square metre of visible surface (1 per cm²)
@@ -74,7 +74,7 @@ _RAY_DIRS /= np.linalg.norm(_RAY_DIRS, axis=1, keepdims=True)
 
 def _winding(o3d, scene, normals: np.ndarray, p: np.ndarray) -> np.ndarray:
     """(N,) integer winding numbers of p (N, 3) w.r.t. the closed mesh in an open3d scene (face normals (F, 3)):
-    signed crossings along 3 fixed rays, median (as volsmpl.groundtruth.ray_winding_number, on a prebuilt scene)."""
+    signed crossings along 3 fixed rays, median (as volsmpl.geometry.groundtruth.ray_winding_number, on a prebuilt scene)."""
     o = np.ascontiguousarray(p, dtype=np.float32)
     per_ray = []
     for d in _RAY_DIRS:
@@ -146,7 +146,7 @@ class RoomSolids:
         """(M,) bool: the points q (M, 3) inside item k."""
         mesh = self.items[k][1]
         if deps.igl_or_none() is not None:
-            from volsmpl.groundtruth import winding_number
+            from volsmpl.geometry.groundtruth import winding_number
             return winding_number(mesh.vertices, mesh.faces, q) > 0.5
         if k not in self._queries:
             self._queries[k] = _query(mesh.vertices, mesh.faces)

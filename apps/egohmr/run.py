@@ -22,7 +22,7 @@ TUNE_MPJPE_SLACK_MM = 2.0
 
 def _setup(args, split: str):
     import volsmpl
-    from volsmpl.devices import check_device
+    from volsmpl.runtime.devices import check_device
 
     from .data import make_frames, scene_mesh
     from .evaluate import prepare
@@ -45,7 +45,7 @@ def _setup(args, split: str):
 def _volume(guide: str, device="cpu", encoder_bf16: bool = False):
     """The guide's volume (None for 'none'); a learned one's part encoder under bfloat16 autocast with encoder_bf16."""
     import volsmpl
-    from volsmpl.models import model_kind
+    from volsmpl.volume.models import model_kind
 
     if guide == "none":
         return None
@@ -56,14 +56,14 @@ def _volume(guide: str, device="cpu", encoder_bf16: bool = False):
 
 
 def run_sample(args) -> int:
-    from volsmpl import paper
-    from volsmpl.outputs import check_writable, write_atomic
-    from volsmpl.provenance import machine_info
+    from volsmpl.report import paper
+    from volsmpl.io.outputs import check_writable, write_atomic
+    from volsmpl.io.provenance import machine_info
 
     from .cli import options_of, parse_guides, scales_of
     from .evaluate import max_batch, sample_frames, summarize
     from .figures import frame_figure
-    from volsmpl.mesh_distance import winding_numbers
+    from volsmpl.geometry.point_mesh_distance import winding_numbers
 
     from .pose import pose_body
 
@@ -136,8 +136,8 @@ def run_sample(args) -> int:
 
 
 def run_tune(args) -> int:
-    from volsmpl.outputs import check_writable, write_atomic
-    from volsmpl.provenance import machine_info
+    from volsmpl.io.outputs import check_writable, write_atomic
+    from volsmpl.io.provenance import machine_info
 
     from .cli import PAPER_SCALE, options_of, parse_guides
     from .evaluate import sample_frames, summarize
@@ -196,10 +196,10 @@ def run_user_frame(args) -> int:
     """A user's frame file and scene scan: each guide's sample, its collision ratio and contact (exact tests on
     the scan's points), and a figure; no ground truth, so no joint errors."""
     import volsmpl
-    from volsmpl.mesh_distance import winding_numbers
-    from volsmpl.outputs import check_writable, write_atomic
-    from volsmpl.provenance import machine_info
-    from volsmpl.render import render_camera_view, grid, save_png
+    from volsmpl.geometry.point_mesh_distance import winding_numbers
+    from volsmpl.io.outputs import check_writable, write_atomic
+    from volsmpl.io.provenance import machine_info
+    from volsmpl.viz.render import render_camera_view, grid, save_png
     from volsmpl.scene.scan import read_scan, to_y_up
     from scipy.spatial import cKDTree
 
@@ -218,7 +218,7 @@ def run_user_frame(args) -> int:
     out = check_writable(args.out or "out/egohmr_user", "dir", "--out")
     frame = load_user_frame(args.frame)
     scan = camera_points(frame, to_y_up(read_scan(args.scene, args.units, n_surface=1_000_000, seed=args.seed), args.up))
-    from volsmpl.devices import check_device
+    from volsmpl.runtime.devices import check_device
 
     dev = check_device(args.device)
     body = volsmpl.create_body().to(dev)
@@ -269,8 +269,7 @@ def run_user_frame(args) -> int:
 
 def format_table(summary: dict) -> str:
     """Our rows beside the paper's Table 4."""
-    from volsmpl import paper
-
+    from volsmpl.report import paper
     f = lambda x, p=1: "-" if x is None else f"{x:.{p}f}"  # noqa: E731
     head = f"{'':18s} {'batch':>6s} {'s/frame':>8s} {'coll.':>7s} {'cont. %':>8s} {'MPJPE':>7s} {'vis.':>6s} {'invis.':>7s} {'PA':>6s}"
     lines = [head, "-" * len(head)]

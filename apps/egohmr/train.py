@@ -82,7 +82,7 @@ def losses(net: EgoNet, body, d: dict, sched: Schedule, gen: torch.Generator, s:
 
 
 def save_model(out: Path, net: EgoNet, opt, step: int, gen: torch.Generator, s: TrainSettings, body, extra: dict) -> None:
-    from volsmpl.checkpoint import save_checkpoint
+    from volsmpl.io.checkpoint import save_checkpoint
 
     meta = {"body_fingerprint": body.fingerprint, "step": step, "settings": asdict(s), **extra}
     save_checkpoint(out / "model", net.state_dict(), net.config.to_dict(), meta)
@@ -93,7 +93,7 @@ def save_model(out: Path, net: EgoNet, opt, step: int, gen: torch.Generator, s: 
 
 def load_model(path=None, body=None) -> tuple[EgoNet, dict]:
     """The network of a checkpoint (default: the shipped one) and its meta; refuses another body's checkpoint."""
-    from volsmpl.checkpoint import load_checkpoint
+    from volsmpl.io.checkpoint import load_checkpoint
 
     path = Path(path) if path is not None else DEFAULT_CHECKPOINT
     if not Path(str(path) + ".safetensors").is_file() and (path / "model.safetensors").is_file():
@@ -116,7 +116,7 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
           n_train: int | None = None, n_val: int = 64, log=print, body=None) -> Path:
     """Train into folder `out` (module docstring); returns the model path (without extension)."""
     import volsmpl
-    from volsmpl.outputs import check_writable
+    from volsmpl.io.outputs import check_writable
 
     from .data import make_frames
     from .dataset import frame_tensors
@@ -127,7 +127,7 @@ def train(out, settings: TrainSettings | None = None, config: EgoConfig | None =
     out = check_writable(out, "dir", "--out")
     if s.threads:
         torch.set_num_threads(s.threads)
-    from volsmpl.devices import check_device
+    from volsmpl.runtime.devices import check_device
 
     dev = check_device(s.device)
     body = (body or volsmpl.create_body()).to(dev)

@@ -226,7 +226,7 @@ def mesh_file(case: HoiCase) -> Path | None:
 def mesh_digest(case: HoiCase) -> str | None:
     """sha256 of the object mesh file's bytes (None for a template): part of a fit's key, so an edited or
     replaced file is fitted anew rather than served from OUT/cases/."""
-    from volsmpl.outputs import file_sha256
+    from volsmpl.io.outputs import file_sha256
 
     p = mesh_file(case)
     return None if p is None else file_sha256(p)

@@ -6,7 +6,7 @@
 
 Writes OUT/results.json (config, summary.<model>, the paper's Table 3, per-case records, machine meta),
 OUT/case_<name>.png for the first --render cases and OUT/summary.png; each finished fit is also kept in
-OUT/cases/<case>_<model>.json (volsmpl.case_store) with the key of what made it (configuration, the case's content,
+OUT/cases/<case>_<model>.json (volsmpl.io.case_store) with the key of what made it (configuration, the case's content,
 the kind's weights, the source code), so a run stopped at any moment continues with --resume, fitting only the
 cases without a matching record.
 """
@@ -106,14 +106,14 @@ def _volumes(body, models: list, device: str) -> dict:
 
 def run(args) -> int:
     import volsmpl
-    from volsmpl import paper
-    from volsmpl.models import model_kind, parse_models
-    from volsmpl.outputs import check_writable, write_atomic
-    from volsmpl.provenance import machine_info
+    from volsmpl.report import paper
+    from volsmpl.volume.models import model_kind, parse_models
+    from volsmpl.io.outputs import check_writable, write_atomic
+    from volsmpl.io.provenance import machine_info
 
-    from volsmpl.case_store import CaseStore, job_key
+    from volsmpl.io.case_store import CaseStore, job_key
 
-    from . import database
+    from volsmpl.apps.hoi import database
     from .case import case_to_dict, load_case, mesh_digest
     from .figures import case_panel, summary_plot
     from .fit import FitConfig, Problem, fit_cases
@@ -217,8 +217,7 @@ def case_line(name: str, model: str, r) -> str:
 
 def format_table(summary: dict) -> str:
     """Our rows beside the paper's Table 3."""
-    from volsmpl import paper
-
+    from volsmpl.report import paper
     head = f"{'':22s} {'ms/iter':>9s} {'total min':>9s} {'collision %':>12s} {'contact cm':>11s} {'obj cm':>7s} {'obj deg':>8s} {'scale %':>8s}"
     lines = [head, "-" * len(head)]
     f = lambda x, p=2: "-" if x is None else f"{x:.{p}f}"  # noqa: E731

@@ -40,10 +40,10 @@ from scipy.spatial.transform import Rotation
 
 from .case import HoiCase, Similarity, case_to_dict, load_case, save_case
 from .interactions import RECIPES, Recipe
-from .rig import Rig
+from volsmpl.body.rig import Rig
 
 # 2 (2026-11-25): the body-inside-object check counts winding numbers exactly (MeshQuery, float64) on the objects'
-# touching components, where open3d's float32 rays miscounted (volsmpl.mesh_distance.winding_numbers)
+# touching components, where open3d's float32 rays miscounted (volsmpl.geometry.point_mesh_distance.winding_numbers)
 DB_VERSION = 2
 KIND_NAMES = tuple(RECIPES)
 IMAGE_SIZE = (480, 640)  # (H, W)
@@ -89,21 +89,21 @@ def _fingerprint(body) -> str:
 # ----------------------------------------------------------------------------------------------- exact checks
 def _object_depth_in_body(vb: torch.Tensor, fb: torch.Tensor, vo: np.ndarray) -> float:
     """Smallest signed distance of the object's vertices to the body mesh (negative inside), metres."""
-    from volsmpl.mesh_distance import mesh_signed_distance
+    from volsmpl.geometry.point_mesh_distance import mesh_signed_distance
     return float(mesh_signed_distance(vb, fb, torch.as_tensor(vo), closed=True).min())
 
 
 def _body_inside_object(vo: np.ndarray, fo: np.ndarray, pts: np.ndarray) -> np.ndarray:
     """Winding numbers of body points w.r.t. the (closed, multi-component) object mesh > 1/2 (exact: several
-    components take MeshQuery, volsmpl.mesh_distance.winding_numbers)."""
-    from volsmpl.mesh_distance import winding_numbers
+    components take MeshQuery, volsmpl.geometry.point_mesh_distance.winding_numbers)."""
+    from volsmpl.geometry.point_mesh_distance import winding_numbers
     w = winding_numbers(torch.as_tensor(vo), torch.as_tensor(fo), torch.as_tensor(pts, dtype=torch.float64), closed=True)
     return w.numpy() > 0.5
 
 
 def _surface_distance(vo: np.ndarray, fo: np.ndarray, pts: np.ndarray) -> float:
     """Unsigned distance from points to a triangle set (min over the points)."""
-    from volsmpl.mesh_distance import closest_points_on_triangles, nearest_faces
+    from volsmpl.geometry.point_mesh_distance import closest_points_on_triangles, nearest_faces
     v, f, p = torch.as_tensor(vo), torch.as_tensor(fo).long(), torch.as_tensor(pts, dtype=torch.float64)
     idx = nearest_faces(v, f, p)
     tri = v[f[idx]]
@@ -180,7 +180,7 @@ def _grip(scene: _Scene, recipe: Recipe) -> np.ndarray:
         scene.set_pose(euler)
         vb = scene.vb.numpy()
         vo = scene.obj(t)
-        from volsmpl.mesh_distance import mesh_signed_distance
+        from volsmpl.geometry.point_mesh_distance import mesh_signed_distance
         cl = {s: float(mesh_signed_distance(torch.as_tensor(vo), torch.as_tensor(scene.ft),
                                             torch.as_tensor(scene.rig.part_vertices(vb, f"{s}_hand", f"{s}_forearm")),
                                             closed=True).min())
@@ -364,7 +364,7 @@ def make_case(index: int, seed: int = 0, body=None, noise: float = 1.0, image_di
 
 def render_case(case: HoiCase, body_faces, cam, vb, vo, fo, path) -> None:
     """The body (skin colour) and the object (blue) through the case's camera, observed keypoints in red."""
-    from volsmpl.render import draw_keypoints, render_camera_view, save_png
+    from volsmpl.viz.render import draw_keypoints, render_camera_view, save_png
     img = render_camera_view([(vb, body_faces, (0.92, 0.72, 0.6)), (vo, fo, (0.35, 0.55, 0.9))], cam, max_edge=0.2)
     kp = case.keypoints_2d
     draw_keypoints(img, kp[:, :2], kp[:, 2] > 0, (220, 30, 30), 3)

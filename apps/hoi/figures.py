@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import torch
 
-from volsmpl.render import grid, render_camera_view, render_scene, save_png
+from volsmpl.viz.render import grid, render_camera_view, render_scene, save_png
 
 from .case import Similarity
 
@@ -37,7 +37,7 @@ def _sim(s):
 
 def _inside(problem, sim: dict, i: int) -> np.ndarray:
     """Object vertices inside the placed body (exact mesh test), (N,) bool."""
-    from volsmpl.mesh_distance import mesh_signed_distance
+    from volsmpl.geometry.point_mesh_distance import mesh_signed_distance
 
     v, o = _placed(problem, sim, i)
     d = mesh_signed_distance(torch.as_tensor(v), problem.faces.cpu(), torch.as_tensor(o), closed=True)

@@ -24,7 +24,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import torch
 
-from volsmpl.mesh_distance import mesh_signed_distance
+from volsmpl.geometry.point_mesh_distance import mesh_signed_distance
 from volsmpl.optim import Term, optimize
 from volsmpl.scene import SYMMETRY, rotation_error_deg
 

@@ -20,7 +20,7 @@ from volsmpl.body.model import SMPL_JOINT_NAMES
 from volsmpl.body.poses import BODY_JOINTS
 from volsmpl.scene.objects import make_object
 
-from .rig import Rig, jitter, named_euler, set_joints
+from volsmpl.body.rig import Rig, jitter, named_euler, set_joints
 
 _J = {n: i for i, n in enumerate(SMPL_JOINT_NAMES)}
 #: the interaction kinds: name -> (recipe function name, object category)

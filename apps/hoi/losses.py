@@ -33,7 +33,7 @@ import math
 import torch
 from kornia.geometry.camera.perspective import project_points
 
-from volsmpl.mesh_distance import closest_points_on_triangles
+from volsmpl.geometry.point_mesh_distance import closest_points_on_triangles
 
 __all__ = ["to_camera", "to_body_frame", "relative_similarity", "contact_terms", "body_query", "penetration",
            "scale_prior", "keypoint_term", "silhouette_term"]
@@ -181,7 +181,7 @@ def body_query(volume, out):
     that stays as it is through the fit: a learned kind encodes its parts once (`volume.encode`: all parts) and
     every call only decodes (`query_encoded`); the exact mesh kind measures the exact signed distances to the
     posed mesh at every call (`query`)."""
-    from volsmpl.models import model_kind
+    from volsmpl.volume.models import model_kind
 
     if model_kind(volume.kind).learned:
         enc = volume.encode(out)

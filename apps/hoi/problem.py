@@ -18,7 +18,7 @@ import math
 import numpy as np
 import torch
 
-from volsmpl.rotations import matrix_to_rotation_6d, rotation_6d_to_matrix
+from volsmpl.geometry.rotations import matrix_to_rotation_6d, rotation_6d_to_matrix
 
 from .case import ANY_REGION, HoiCase, check_case, object_mesh, object_template
 from .losses import body_query, contact_terms, relative_similarity, to_camera

@@ -30,10 +30,10 @@ def main(argv=None) -> int:
     import torch
 
     import volsmpl
-    from volsmpl.models import parse_models
-    from volsmpl.outputs import check_writable, write_atomic
+    from volsmpl.volume.models import parse_models
+    from volsmpl.io.outputs import check_writable, write_atomic
 
-    from . import database
+    from volsmpl.apps.hoi import database
     from .cli import case_line, select_cases
     from .fit import FitConfig, Problem, fit_case
 

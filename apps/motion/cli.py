@@ -135,13 +135,13 @@ def _print_case(scene: str, k: int, label: str, met: dict, reused: bool = False)
 
 def run(args) -> int:
     import volsmpl
-    from volsmpl import paper
-    from volsmpl.case_store import CaseStore, job_key
-    from volsmpl.models import model_kind, parse_models
-    from volsmpl.outputs import check_writable, write_atomic
-    from volsmpl.provenance import machine_info
+    from volsmpl.report import paper
+    from volsmpl.io.case_store import CaseStore, job_key
+    from volsmpl.volume.models import model_kind, parse_models
+    from volsmpl.io.outputs import check_writable, write_atomic
+    from volsmpl.io.provenance import machine_info
 
-    from . import walk as W
+    from volsmpl.apps.motion import walk as W
     from .figures import topdown
     from .scenes import check_endpoint, check_pair, floor_xz, load_scene, room_scenes
     from .synth import SynthConfig, check_frames, measure_cost, published_penetration, synthesize_batch

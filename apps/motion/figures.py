@@ -61,6 +61,6 @@ def topdown(scene, paths: dict, pairs=None, size: int = 640, path=None) -> np.nd
     cv2.putText(img, "goal", (size + 40, y + 23), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (20, 20, 20), 1, cv2.LINE_AA)
     cv2.putText(img, scene.name, (10, size - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (20, 20, 20), 1, cv2.LINE_AA)
     if path is not None:
-        from volsmpl.render import save_png
+        from volsmpl.viz.render import save_png
         save_png(path, img)
     return img

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
-from .gait import FOOT_JOINTS
+from volsmpl.body.gait import FOOT_JOINTS
 
 if TYPE_CHECKING:
     from .walk import Walk
@@ -116,7 +116,7 @@ def render_strip(walk: Walk, faces, path=None, every: int = 10, sequence: int = 
     """
     import cv2
 
-    from volsmpl.render import render_scene, save_png
+    from volsmpl.viz.render import render_scene, save_png
     if every < 1:
         raise ValueError(f"every must be >= 1, got {every}")
     V = walk.vertices[sequence].detach().cpu().double().numpy()

@@ -10,7 +10,7 @@
   box of a frame are left out of that frame (their penetration is exactly 0 for every kind: the analytic box
   distance is positive, COAP's masked occupancy is 0, and such points are outside the mesh), and frames are grouped
   by the set of parts that hold points, so the encoder runs only on (frame, part) pairs that matter. The value and
-  the gradient are those of `collision_loss` on the full cloud (tests/test_motion_app.py checks it).
+  the gradient are those of `collision_loss` on the full cloud (tests/apps/motion/test_app.py checks it).
   `frames='all'` or an int n: only n evenly spaced frames (the authors' COAP setting, 16, when all frames do not fit).
 - `UnitGradAdam`: Adam whose gradients are scaled to unit length per problem (over all variables of that problem)
   before each step, as DartControl's `optim_unit_grad`.
@@ -22,8 +22,8 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
-from volsmpl.boxes import inside_boxes
-from volsmpl.partition import Partition
+from volsmpl.geometry.boxes import inside_boxes
+from volsmpl.body.partition import Partition
 
 __all__ = ["goal_loss", "goal_distance", "SceneCollision", "UnitGradAdam", "linear_decay", "frame_subset",
            "walk_output"]

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from volsmpl.outputs import write_atomic
-from volsmpl.provenance import machine_info
+from volsmpl.io.outputs import write_atomic
+from volsmpl.io.provenance import machine_info
 
 from .summary import compared_weight
 

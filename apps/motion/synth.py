@@ -20,11 +20,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from volsmpl.meter import Meter
-from volsmpl.mesh_distance import mesh_signed_distance
+from volsmpl.runtime.meter import Meter
+from volsmpl.geometry.point_mesh_distance import mesh_signed_distance
 from volsmpl.optim import Term, Variable, optimize
 
-from . import walk as W
+from volsmpl.apps.motion import walk as W
 from .objective import (SceneCollision, frame_subset, goal_distance, goal_loss, linear_decay, unit_grad_adam,
                         walk_output)
 

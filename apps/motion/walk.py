@@ -35,7 +35,7 @@ Contact labels are the stance intervals of the phase (left, right), heel strike 
 The root follows the feet, so pose residuals that move the feet also change how far the body gets (the path
 controls say how far the phase advances; the pelvis ends within ~2.5 % of speed x time on a straight walk).
 
-Measured on the default body, straight walk at 1.3 m/s, 98 frames (tests/test_motion_walk.py): stance foot's lowest
+Measured on the default body, straight walk at 1.3 m/s, 98 frames (tests/apps/motion/test_walk.py): stance foot's lowest
 vertex within 0.9 cm of the floor (0 in single support), ball joint slide <= 1.0 cm per stance, foot_skate
 0.06 cm/frame, swing foot clearance >= 2.4 cm in mid-swing, stride 1.395 m (0.70 m per step), pelvis travel 99.8 % of
 speed x time (97.7 % at 1.0 m/s). Turning slides the feet in double support (both feet are blended while the body
@@ -70,7 +70,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
-from .gait import (ANKLE_JOINTS, FOOT_JOINTS, STANCE, anchor_weights, axis_quat, quat_mul, quat_to_axis_angle,
+from volsmpl.body.gait import (ANKLE_JOINTS, FOOT_JOINTS, STANCE, anchor_weights, axis_quat, quat_mul, quat_to_axis_angle,
                    stance_contacts, walk_cycle, walk_cycle_quat)
 # the measures are part of this module's API (callers use walk.jerk, walk.foot_skate, ...)
 from .measures import JERK_WEIGHT, check_tensor, foot_skate, jerk, pose_prior, render_strip

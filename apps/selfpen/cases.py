@@ -139,7 +139,7 @@ def generate_cases(body=None, recipes=RECIPES, log=None) -> list[dict]:
     volumetric self-penetration loss can act on (folds at joints alone do not count).
     """
     from volsmpl import create_body
-    from volsmpl.partition import Partition
+    from volsmpl.body.partition import Partition
     from .triangles import body_collisions, count_collidable
 
     body = body or create_body()

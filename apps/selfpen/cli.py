@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from volsmpl.models import model_kind, parse_models
-from volsmpl.provenance import machine_info
+from volsmpl.volume.models import model_kind, parse_models
+from volsmpl.io.provenance import machine_info
 
 from .cases import CASES_FILE, load_cases
 from .optimize import PAPER, PRESETS, SelfPenConfig, format_table, repair_case, summarize
@@ -70,7 +70,7 @@ def add_parser(sub):
 def _checkpoints(args, models: list[str]) -> dict:
     """model -> checkpoint path or None (shipped); each given checkpoint is checked to exist and to hold its model,
     and one given for a model that does not run is refused (it would be ignored)."""
-    from volsmpl.checkpoint import expect_checkpoint_model
+    from volsmpl.volume.models import expect_checkpoint_model
 
     ck = {m: None for m in models}
     for m, c in (("volsmpl", args.checkpoint_volsmpl), ("coap", args.checkpoint_coap)):
@@ -113,7 +113,7 @@ def _case_names(text: str) -> list[str] | None:
 def render_case(path, faces: np.ndarray, results: dict, size: int = 320) -> None:
     """Before / after (per model: RepairResult kept with keep_meshes) views, front and side,
     intersecting triangles highlighted; the label gives the number of intersecting pairs."""
-    from volsmpl.render import grid, render_mesh, save_png
+    from volsmpl.viz.render import grid, render_mesh, save_png
 
     first = next(iter(results.values()))
     panels = [("before", first.vertices_before, first.pairs_before)]
@@ -131,7 +131,7 @@ def render_case(path, faces: np.ndarray, results: dict, size: int = 320) -> None
 
 def run(args) -> int:
     import volsmpl
-    from volsmpl.outputs import check_writable, write_atomic
+    from volsmpl.io.outputs import check_writable, write_atomic
 
     check_writable(args.out, "dir", "--out")  # before any work: a bad folder fails in seconds
     models = parse_models(args.model)

@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import torch
 
-from volsmpl import paper
+from volsmpl.report import paper
 from volsmpl.optim import MaxIters, Patience, StopWhen, Term, Variable, optimize
 
 from .cases import Case

@@ -79,7 +79,7 @@ file with fewer than 300 shape columns) plus 10 zero expression columns.
 Determinism. Fixed seeds (torch generator state forked, so the caller's RNG is untouched), fixed orders, float32
 arrays with fixed dtypes, and .npz files written by `save_npz_deterministic` (zip entries sorted, fixed
 date_time, deflate) instead of numpy's savez (which stamps the current time). JSON is written with sorted keys and
-rounded floats. `tests/test_anny_export.py::test_export_is_deterministic` exports twice with 48 samples (~15 s);
+rounded floats. `tests/body/test_anny_export.py::test_export_is_deterministic` exports twice with 48 samples (~15 s);
 the full export (1024 samples) takes ~70 s on 2 CPU cores once Anny's cache (~/.cache/anny) is built (first run:
 +~1-2 min to build the jaw rig model data).
 

@@ -36,7 +36,7 @@ def check_mesh_path(path) -> str:
 def run(args) -> int:
     import torch
 
-    from ..outputs import check_writable, write_atomic
+    from volsmpl.io.outputs import check_writable, write_atomic
 
     # output paths first: a bad one fails before any work
     if args.action == "export" and args.out:
@@ -57,7 +57,7 @@ def run(args) -> int:
         return 0
     body = create_body(args.model)
     if args.action == "info":
-        from ..partition import Partition
+        from volsmpl.body.partition import Partition
         part = Partition(body)
         print(f"file: {body.model_path}\nvertices: {body.v_template.shape[0]}  faces: {len(body.faces)}  "
               f"joints: {body.num_joints}  betas: {body.num_betas}  fingerprint: {body.fingerprint}")

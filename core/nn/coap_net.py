@@ -1,6 +1,6 @@
 """COAP baseline network (Mihajlovic et al., ECCV 2022): compositional part occupancy.
 
-Same interface as :class:`volsmpl.nn.volsmpl_net.VolumetricSMPLNet`, so :class:`volsmpl.volume.Volume`
+Same interface as :class:`volsmpl.nn.volsmpl_net.VolumetricSMPLNet`, so :class:`volsmpl.volume.learned.Volume`
 can swap the two (``kind``, ``output``, ``config``, ``num_parts``, ``encoder_bf16``, ``encode``,
 ``decode_dense``, ``decode_pairs``). Architecture, following COAP's released code:
 
@@ -26,7 +26,7 @@ split by input columns and s = 1 (layer 0) or 1/sqrt(2) (skip layers),
     s W [h; x; flag; onehot_k; z_k] + b  =  s W_pt [h; x] + (b + s (W_flag flag + W_hot[:, k] + W_z z_k)).
 
 :meth:`CoapNet.encode` returns these per-(body, part) biases; per point only the x (and h)
-columns are multiplied. ``tests/test_nn_coap.py`` checks this against the naive concatenation.
+columns are multiplied. ``tests/nn/test_coap_net.py`` checks this against the naive concatenation.
 The decoder weights are shared by all parts, so the pair path needs no grouping: each pair gathers
 its (body, part) bias rows and all pairs go through the same matmuls.
 

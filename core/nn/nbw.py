@@ -16,7 +16,7 @@ points of a (body, part), so with W_k^l = [W_pt | W_z] split by input columns,
     W_k^l [h; gamma(x); z_k] + b^l  =  W_pt [h; gamma(x)] + (b^l + W_z z_k).
 
 :meth:`NBWDecoder.generate` therefore returns per-(body, part) point weights W_pt and folded biases
-b^l + W_z z_k; the 128 latent columns are never multiplied per point. ``tests/test_nn_nbw.py``
+b^l + W_z z_k; the 128 latent columns are never multiplied per point. ``tests/nn/test_nbw.py``
 checks this against the naive per-point concatenation.
 
 Everything is body-agnostic: the number of parts K is a constructor argument.
@@ -361,7 +361,7 @@ class NBWDecoder(nn.Module):
         """The decoder on chunks of points, each chunk with its own weights (one batched matmul per layer).
 
         Shape: xs (C, n, 3); Ws[l] (C, in_pt_l, out_l) (a layer's weights transposed); bs[l] (C, 1, out_l) -> (C, n,
-        out_dim). Used by `decode_pairs` and the static lean query (volsmpl.query_graph)."""
+        out_dim). Used by `decode_pairs` and the static lean query (volsmpl.volume.engine.query_graph)."""
         p = positional_encoding(xs, self.pe_levels)                     # (C, n, x_dim)
         h = p
         for l in range(self.n_layers):

@@ -2,7 +2,7 @@
 batched decoder runs on, its default chunk size, and the check of (point, body, part) pairs against an encoded batch.
 
 A group is one (body, part) decoder, g = body * K + part; a layer of the batched decoder is one batched matmul over
-chunks that each hold pairs of a single group (`NBWDecoder.decode_pairs`, `volsmpl.query_graph`).
+chunks that each hold pairs of a single group (`NBWDecoder.decode_pairs`, `volsmpl.volume.engine.query_graph`).
 
     lay = group_pairs(group, n_groups=B * K, chunk=default_chunk(M, n_nonempty))
     xs = x[lay.src].view(-1, lay.chunk, 3)            # chunk c is decoded with the weights of group lay.chunk_group[c]
@@ -54,7 +54,7 @@ def group_pairs(group: torch.Tensor, n_groups: int, chunk: int, counts: Optional
         group_sorted: the caller guarantees `group` is non-decreasing (no sort is made; unsorted input then gives
             a wrong layout).
         n_chunks_total: a fixed number of chunks, at least the layout's (e.g. ceil(M / chunk) + n_groups): no host
-            sync and shapes set by (M, chunk, n_chunks_total) alone (volsmpl.query_graph captures it); the chunks past
+            sync and shapes set by (M, chunk, n_chunks_total) alone (volsmpl.volume.engine.query_graph captures it); the chunks past
             the layout's are given to the last group and hold pair 0.
     Returns:
         :class:`PairLayout`.

@@ -1,6 +1,6 @@
 """The optimisation harness every app runs on: named tensors of a batch of problems, weighted loss terms,
 any torch optimiser, stop rules, per-variable step limits, a learning-rate schedule, the body network frozen,
-per-step records (each term, time) and the run's peak memory (volsmpl.meter).
+per-step records (each term, time) and the run's peak memory (volsmpl.runtime.meter).
 
     res = optimize(
         {"body_pose": Variable(theta0.clone(), max_step=0.1, group=3)},
@@ -28,7 +28,7 @@ from typing import Callable
 
 import torch
 
-from ..meter import Meter, sync
+from volsmpl.runtime.meter import Meter, sync
 from .stops import MaxIters, StopRule
 
 __all__ = ["Variable", "Term", "Evaluation", "StepRecord", "OptimResult", "optimize"]
@@ -98,7 +98,7 @@ class StepRecord:
 @dataclass
 class OptimResult:
     """What optimize returns: final variables (detached), per-problem status and number of updates, the
-    records, the loop's wall time and peak memory above its start (volsmpl.meter)."""
+    records, the loop's wall time and peak memory above its start (volsmpl.runtime.meter)."""
 
     variables: dict
     status: list

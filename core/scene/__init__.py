@@ -17,7 +17,7 @@
 - `cache`: the user cache folder for generated data (`cached(name, version, seed, build_fn)`, atomic writes; versions
   that carry a digest of the generator's source: `code_version`).
 
-Rendering of scenes (several meshes, dots, camera views with keypoints) is in `volsmpl.render`.
+Rendering of scenes (several meshes, dots, camera views with keypoints) is in `volsmpl.viz.render`.
 """
 from .cache import cache_dir, cache_path, cached, code_version
 from .camera import (camera_center, camera_to_world, intrinsics_from_fov, look_at, make_camera, orbit_eye, project,

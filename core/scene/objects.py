@@ -17,7 +17,7 @@ Conventions (the project's): metres, Y up, right-handed. The canonical frame of 
 Meshes: one `trimesh.Trimesh` per template, the concatenation of closed components (each watertight and wound
 outward, positive volume; vertices are not merged between components, so the whole mesh is watertight too).
 Components touch at their joints; a few interpenetrate by millimetres (cup handle in the wall, cart and umbrella
-joints): for inside/outside use winding numbers (`volsmpl.groundtruth.mesh_sdf(sign='winding')`), which count the
+joints): for inside/outside use winding numbers (`volsmpl.geometry.groundtruth.mesh_sdf(sign='winding')`), which count the
 union as inside, rather than ray parity.
 
 Sizes: `SIZE_PRIOR` is a hand-made table of real-world sizes (bounding-box height/width/depth along y/x/z, in

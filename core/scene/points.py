@@ -22,7 +22,7 @@ import numpy as np
 import torch
 import trimesh
 
-from ..deps import open3d_or_none
+from volsmpl.runtime.deps import open3d_or_none
 
 
 def _as_points(points, name: str = "points") -> np.ndarray:

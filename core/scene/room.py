@@ -5,11 +5,11 @@ z in [-D/2, D/2], floor at y = 0) closed by four walls WALL_THICKNESS thick over
 thick; no ceiling. Its methods give:
 
 - geometry: `interior`, `bounds`, `structure` (floor slab and walls), `mesh` (one trimesh, optional per-face
-  item labels), `render_meshes` (coloured meshes for `volsmpl.render`, optional cutaway);
+  item labels), `render_meshes` (coloured meshes for `volsmpl.viz.render`, optional cutaway);
 - affordances: `seats`, `walls`, `supports`;
 - free space: `clearance` (exact horizontal distance to the nearest floor item's footprint or wall, 0 inside),
   `free_grid` on a GRID_CELL (5 cm) grid, `path_clearance`, `sample_start_goal`, `sample_viewpoint` (with a
-  line-of-sight test: open3d's ray cast, or `volsmpl.mesh_query.first_hits` in torch where open3d does not import).
+  line-of-sight test: open3d's ray cast, or `volsmpl.geometry.triangle_queries.first_hits` in torch where open3d does not import).
 
 The layout generator that places the items is in `furnish.py`; seeds, `make_room` and the cached scene cloud in
 `rooms.py`.
@@ -157,7 +157,7 @@ class Room:
         return (m, lab) if return_labels else m
 
     def render_meshes(self, cutaway_yaw: float | None = None) -> list[tuple[np.ndarray, np.ndarray, tuple]]:
-        """[(vertices, faces, rgb)] for `volsmpl.render.render_scene` / `render_camera_view`: floor, walls, then the
+        """[(vertices, faces, rgb)] for `volsmpl.viz.render.render_scene` / `render_camera_view`: floor, walls, then the
         items in per-category colours. cutaway_yaw: the yaw (degrees) of an outside view, whose walls between the
         viewer and the room are left out."""
         out = []
@@ -292,14 +292,14 @@ class Room:
 
     def _line_of_sight(self, eye: np.ndarray, target: np.ndarray, slack: float = 0.25) -> bool:
         """Whether the ray from eye towards target meets the room mesh no nearer than `slack` before the target:
-        open3d's ray cast (float32) where open3d imports, else `volsmpl.mesh_query.first_hits` (exact, float64)."""
-        from ..deps import open3d_or_none
+        open3d's ray cast (float32) where open3d imports, else `volsmpl.geometry.triangle_queries.first_hits` (exact, float64)."""
+        from volsmpl.runtime.deps import open3d_or_none
         o3d = open3d_or_none()
         d = target - eye
         dist = np.linalg.norm(d)
         if o3d is None:
             import torch
-            from ..mesh_query import first_hits
+            from volsmpl.geometry.triangle_queries import first_hits
             if "ray_triangles" not in self._cache:
                 m = self.mesh()
                 self._cache["ray_triangles"] = torch.as_tensor(np.asarray(m.vertices, np.float64)[m.faces])

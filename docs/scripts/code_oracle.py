@@ -21,7 +21,7 @@ along the face normal by t ~ N(0, (3 mm)^2), target SDF t (first order; wrong on
 a few mm). `--train-step S` takes the bodies of training step S's batch (`train_batches.make_batch`, the run's
 config; a step the run has not reached is a fresh draw of the training distribution) instead of validation bodies,
 scored on `validation.query_points` of those bodies. `--fit parts` fits each part's own decoder on its own faces'
-points (the form `volsmpl.code_refinement` uses, which other parts overlapping it cannot mislead).
+points (the form `volsmpl.volume.code_refinement` uses, which other parts overlapping it cannot mislead).
 
 If the fitted codes score far above the encoder's, the decoders can represent the body and the encoder's codes
 are what limits the accuracy; if they score near it, the decoders (their width, the NBW rank) are the limit.
@@ -33,15 +33,15 @@ import time
 
 import torch
 
-from volsmpl.attach import attach_volume
+from volsmpl.volume.attach import attach_volume
 from volsmpl.body.model import create_body
-from volsmpl.evaluate import EvalConfig, evaluation_points
-from volsmpl.groundtruth_cache import ground_truth
-from volsmpl.metrics import compute_metrics
+from volsmpl.evaluation import EvalConfig, evaluation_points
+from volsmpl.evaluation.gt_cache import ground_truth
+from volsmpl.evaluation.metrics import compute_metrics
 from volsmpl.nn.volsmpl_net import PartCode
-from volsmpl.train import sdf_loss
-from volsmpl.train_config import TrainConfig, read_config_file
-from volsmpl.validation import pose_bodies, query_points, validation_bodies
+from volsmpl.train.loop import sdf_loss
+from volsmpl.train.config import TrainConfig, read_config_file
+from volsmpl.evaluation.validation_set import pose_bodies, query_points, validation_bodies
 
 #: seed of the fitting points (the evaluation's are VAL_SEED's)
 FIT_SEED = 424242
@@ -123,7 +123,7 @@ def main():
         verts, points, gt = verts[ids], points[ids], gt[ids]
         bodies = {k: v[ids] for k, v in allb.items()}
     else:
-        from volsmpl.train_batches import make_batch
+        from volsmpl.train.batches import make_batch
         allb = {k: v.float() for k, v in make_batch(tcfg, body, vol.partition, args.train_step)["params"].items()}
         allb["betas"] = allb["betas"][:, :body.num_betas]
         bodies = {k: v[ids] for k, v in allb.items()}

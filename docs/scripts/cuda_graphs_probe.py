@@ -16,8 +16,8 @@ import torch
 
 import volsmpl
 from cuda_profile import timed          # docs/scripts/cuda_profile.py: median ms after 3 warm-up calls
-from volsmpl.bench_jobs import make_frames
-from volsmpl.encoding import Encoding
+from volsmpl.bench.jobs import make_frames
+from volsmpl.volume.encoding import Encoding
 
 
 def tensors_of(x) -> list:

@@ -18,12 +18,12 @@ import statistics
 import torch
 
 import volsmpl
-from volsmpl.bench_jobs import make_frames
-from volsmpl.meter import timed_ms
+from volsmpl.bench.jobs import make_frames
+from volsmpl.runtime.meter import timed_ms
 
 
 def timed(fn, device, n=10, warm=3):
-    """Median milliseconds of n calls after `warm` untimed ones (volsmpl.meter.timed_ms: synchronised on the device)."""
+    """Median milliseconds of n calls after `warm` untimed ones (volsmpl.runtime.meter.timed_ms: synchronised on the device)."""
     for _ in range(warm):
         fn()
     return statistics.median(timed_ms([fn] * n, device))

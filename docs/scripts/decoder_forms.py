@@ -16,8 +16,8 @@ import time
 
 import torch
 
-from volsmpl.attach import attach_volume
-from volsmpl.bench_jobs import make_frames
+from volsmpl.volume.attach import attach_volume
+from volsmpl.bench.jobs import make_frames
 from volsmpl.body.model import create_body
 
 

@@ -15,10 +15,10 @@ import statistics
 
 import torch
 
-from volsmpl.attach import attach_volume
+from volsmpl.volume.attach import attach_volume
 from volsmpl.body.model import create_body
-from volsmpl.meter import timed_ms
-from volsmpl.validation import VAL_SEED, validation_bodies
+from volsmpl.runtime.meter import timed_ms
+from volsmpl.evaluation.validation_set import VAL_SEED, validation_bodies
 
 
 def main():

@@ -16,8 +16,8 @@ import time
 
 import torch
 
-from volsmpl.evaluate import EvalConfig, evaluate_checkpoint
-from volsmpl.provenance import machine_info
+from volsmpl.evaluation import EvalConfig, evaluate_checkpoint
+from volsmpl.io.provenance import machine_info
 
 SHIPPED = {"VolumetricSMPL": "core/assets/volsmpl_anny", "COAP": "core/assets/coap_anny"}
 

@@ -13,7 +13,7 @@ import time
 import torch
 
 import volsmpl
-from volsmpl.validation import validation_bodies
+from volsmpl.evaluation.validation_set import validation_bodies
 
 
 def main() -> None:

@@ -17,11 +17,11 @@ import json
 
 import torch
 
-from volsmpl.attach import attach_volume
+from volsmpl.volume.attach import attach_volume
 from volsmpl.body.model import create_body
-from volsmpl.evaluate import EvalConfig, evaluation_points
-from volsmpl.groundtruth_cache import ground_truth
-from volsmpl.validation import pose_bodies, validation_bodies
+from volsmpl.evaluation import EvalConfig, evaluation_points
+from volsmpl.evaluation.gt_cache import ground_truth
+from volsmpl.evaluation.validation_set import pose_bodies, validation_bodies
 
 #: near-surface points closer than this to the surface (metres) enter the distance-error columns
 NEAR = 0.01

@@ -19,11 +19,11 @@ import time
 
 import torch
 
-from volsmpl.attach import attach_volume
-from volsmpl.bench_jobs import make_frames
+from volsmpl.volume.attach import attach_volume
+from volsmpl.bench.jobs import make_frames
 from volsmpl.body.model import create_body
-from volsmpl.evaluate import EvalConfig, evaluate_volume
-from volsmpl.validation import validation_bodies
+from volsmpl.evaluation import EvalConfig, evaluate_volume
+from volsmpl.evaluation.validation_set import validation_bodies
 
 FORMS = {"full": ("full", False), "dec bf16": ("bf16", False), "enc bf16": ("full", True), "both": ("bf16", True)}
 

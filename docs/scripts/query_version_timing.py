@@ -4,7 +4,7 @@
     for r in 1 2; do for v in old new; do for B in 1 8; do
         PYTHONPATH=/tmp/$v python docs/scripts/query_version_timing.py --label $v --batch $B; done; done; done
 
-Poses `--frames` bench frames (`volsmpl.bench_jobs.make_frames`: 60k points per body, half uniform in the body box,
+Poses `--frames` bench frames (`volsmpl.bench.jobs.make_frames`: 60k points per body, half uniform in the body box,
 half near the surface), then times `t` (a fresh encoding of each frame's pose and the query, `--rounds` passes over
 the frames) and `t query` (15 queries on one cached encoding), medians per body, in this process: the machine's
 drift over minutes falls on both versions alike when they alternate (the README's "Lean query, second pass").
@@ -15,8 +15,8 @@ import statistics
 import torch
 
 import volsmpl
-from volsmpl.bench_jobs import make_frames
-from volsmpl.meter import timed_ms
+from volsmpl.bench.jobs import make_frames
+from volsmpl.runtime.meter import timed_ms
 
 
 def main() -> None:

@@ -14,8 +14,8 @@ from torch.profiler import ProfilerActivity, profile
 
 import volsmpl
 from volsmpl.apps.selfpen.cases import load_cases
-from volsmpl.bench_jobs import is_top_level_op
-from volsmpl.self_penetration import overlap_samples, reduce_selfpen
+from volsmpl.bench.jobs import is_top_level_op
+from volsmpl.volume.self_penetration import overlap_samples, reduce_selfpen
 
 
 def count(fn):

@@ -16,7 +16,7 @@ import time
 import torch
 
 import volsmpl
-from volsmpl.bench_jobs import make_frames, profile_query
+from volsmpl.bench.jobs import make_frames, profile_query
 
 
 def main() -> None:

@@ -1,0 +1,303 @@
+"""Section builders of `volsmpl report` (registry in volsmpl.report.build): each turns the result JSONs of one producer
+into Markdown lines, our numbers beside the paper's (volsmpl.report.paper).
+
+A builder is `build(ctx) -> list[str]`; ctx is a dict with
+    'results'  result name -> parsed JSON, or None where that result is missing
+    'paper'    the section's paper table ids (volsmpl.report.paper.TABLES keys), in order
+    'name'     the section's name
+Provenance, staleness, figures and missing results are written around the builder's lines by volsmpl.report.build.
+"""
+from __future__ import annotations
+
+from volsmpl.report import paper as paper_tables
+MIB = 2.0 ** 20
+
+
+def fmt(v) -> str:
+    """A measured number, compactly: '-' for None."""
+    if v is None:
+        return "-"
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return str(v)
+    if isinstance(v, int):
+        return f"{v:,}"
+    a = abs(v)
+    if a == 0:
+        return "0"
+    if a >= 100:
+        return f"{v:,.1f}"
+    if a >= 1:
+        return f"{v:.2f}"
+    if a >= 0.01:
+        return f"{v:.3f}"
+    return f"{v:.2e}"
+
+
+def fmt_paper(v) -> str:
+    """A paper number as printed (the value stored in volsmpl.report.paper)."""
+    return "-" if v is None else f"{v:g}"
+
+
+def md_table(header: list[str], rows: list[list[str]]) -> list[str]:
+    """A Markdown table; columns whose cells all read as numbers are right-aligned."""
+    num = lambda c: str(c) == "" or str(c)[:1].isdigit() or str(c)[:1] == "-"  # noqa: E731
+    align = ["---:" if i and all(num(r[i]) for r in rows if i < len(r)) else "---" for i in range(len(header))]
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join(align) + "|"]
+    return out + ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+
+
+def get_path(d, dotted: str):
+    """d[a][b][c] for dotted 'a.b.c'; None where a key is missing."""
+    for k in dotted.split("."):
+        if not isinstance(d, dict) or k not in d:
+            return None
+        d = d[k]
+    return d
+
+
+def _is_num(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def paper_caption(tid: str) -> str:
+    t = paper_tables.TABLES[tid]
+    return f"Paper Table {tid}: {t['title'].rstrip('.')}; hardware: {t['hardware']}."
+
+
+def summary_table(tid: str, groups: list[tuple[str, str, dict]], key_map: dict | None = None,
+                  extra: list[str] | None = None, paper_rows: list[str] | None = None) -> list[str]:
+    """Our summaries beside paper Table `tid`.
+
+    groups: (row label, back-end key, {metric: value}); the paper's row of the same back-end key follows each
+    group's first row. key_map: paper column -> our metric key where they differ. extra: more of our metric keys
+    as columns (default: every numeric key of the summaries that no paper column reads). paper_rows: the paper rows
+    to print (default: every row; the ones matching no group go last)."""
+    t = paper_tables.TABLES[tid]
+    key_map = key_map or {}
+    cols = list(t["columns"])
+    read = {key_map.get(c, c) for c in cols}
+    if extra is None:
+        extra = []
+        for _, _, s in groups:
+            extra += [k for k, v in s.items() if _is_num(v) and k not in read and k not in extra]
+    header = ["row"] + [f"{t['columns'][c]['label']} [{t['columns'][c]['unit']}]".replace(" []", "") for c in cols]
+    header += extra
+    notes = t.get("notes", {})
+    wanted = list(t["rows"]) if paper_rows is None else list(paper_rows)
+    rows, done = [], set()
+
+    def paper_row(key):
+        cells = [fmt_paper(t["rows"][key][c]) + ("*" if c in notes.get(key, {}) else "") for c in cols]
+        rows.append([f"paper: {t['row_labels'][key]}"] + cells + [""] * len(extra))
+        done.add(key)
+
+    for label, backend, s in groups:
+        rows.append([f"ours: {label}"] + [fmt(s.get(key_map.get(c, c))) for c in cols] + [fmt(s.get(k)) for k in extra])
+        if backend in t["rows"] and backend in wanted and backend not in done:
+            paper_row(backend)
+    for key in wanted:
+        if key not in done:
+            paper_row(key)
+    out = [paper_caption(tid), ""] + md_table(header, rows)
+    for key, n in notes.items():
+        out += [""] + [f"\\* paper, {t['row_labels'][key]}, {t['columns'][c]['label']}: {txt}" for c, txt in n.items()]
+    return out
+
+
+def paper_mismatch(data: dict, tid: str) -> list[str]:
+    """Lines naming the numbers where a result's own `paper` dict disagrees with volsmpl.report.paper."""
+    own, t = data.get("paper"), paper_tables.TABLES[tid]
+    if not isinstance(own, dict):
+        return []
+    bad = [f"{r}.{c}: {own[r][c]} (paper: {t['rows'][r][c]})" for r in t["rows"] if isinstance(own.get(r), dict)
+           for c in t["columns"] if c in own[r] and own[r][c] != t["rows"][r][c]]
+    return [f"Note: the result's own `paper` numbers differ from Table {tid}: " + "; ".join(bad) + "."] if bad else []
+
+
+def n_cases(data: dict) -> int | None:
+    cases = data.get("cases")
+    if isinstance(cases, list):
+        return len(cases)
+    if isinstance(cases, dict):
+        return sum(len(v) if isinstance(v, list) else 1 for v in cases.values())
+    return None
+
+
+# ---------------------------------------------------------------------------------------------------------- builders
+
+def eval_section(ctx) -> list[str]:
+    """Table 1 accuracy from `volsmpl eval` JSONs (results 'eval_volsmpl', 'eval_coap')."""
+    t = paper_tables.TABLES["1"]
+    cols = [("iou_mean", 100), ("iou_surf", 100), ("iou_unif", 100), ("mse_sdf", 1), ("mse_abs_sdf", 1)]
+    header = ["row", "IoU mean [%]", "IoU surf. [%]", "IoU unif. [%]", "MSE SDF [m^2]", "MSE abs SDF [m^2]",
+              "MSE SDF near surface [m^2]"]
+    rows, lines = [], []
+    for name, label, backend in (("eval_volsmpl", "VolumetricSMPL", "volsmpl"), ("eval_coap", "COAP", "coap")):
+        d = ctx["results"].get(name)
+        if d is not None:
+            m = d.get("metrics") or {}
+            rows.append([f"ours: {label}"] + [fmt(None if m.get(k) is None else m[k] * s) for k, s in cols]
+                        + [fmt(m.get("mse_sdf_surf"))])
+            c = d.get("config") or {}
+            lines.append(f"- {label}: {fmt(c.get('n_bodies'))} validation bodies, {fmt(c.get('n_points'))} points "
+                         f"each ({c.get('sampling', 'body')} sampling, near-surface offsets "
+                         f"{fmt(c.get('surface_sigma'))} m), ground-truth sign {c.get('gt_sign', 'not recorded')}, "
+                         f"output {get_path(d, 'extra.output') or 'sdf'}.")
+        rows.append([f"paper: {t['row_labels'][backend]}"] + [fmt_paper(t["rows"][backend][k]) for k, _ in cols]
+                    + ["-"])
+    rows.append([f"paper: {t['row_labels']['leap']}"] + [fmt_paper(t["rows"]["leap"][k]) for k, _ in cols] + ["-"])
+    lines.append("- The paper does not publish the sampling behind its Table 1, and the surface IoU depends strongly on "
+                 "the offsets' scale: `volsmpl eval --sampling parts --surface-sigma S` and the README's \"Sampling "
+                 "protocols\" (docs/eval_protocols.json) give both samplings at 1-3 cm.")
+    return [paper_caption("1"), ""] + md_table(header, rows) + [""] + lines
+
+
+_BENCH_LABELS = {"volsmpl": "VolumetricSMPL (sparse)", "volsmpl-dense": "VolumetricSMPL, dense",
+                 "coap": "COAP as published", "coap-sparse": "COAP on our sparse engine"}
+
+
+def bench_section(ctx) -> list[str]:
+    """Table 1 resources and Table C.4 from `volsmpl bench` (results 'bench': the CPU run, 'bench_cuda': a GPU run)."""
+    runs = [(dev, ctx["results"].get(k) or {}) for dev, k in (("cpu", "bench"), ("cuda", "bench_cuda"))]
+    runs = [(dev, r) for dev, r in runs if r or dev == "cpu"]
+    d = runs[0][1]
+    t1, c4 = paper_tables.TABLES["1"]["rows"], paper_tables.TABLES["C.4"]["rows"]
+    rows, skipped = [], []
+    for dev, run in runs:
+        where = (run.get("meta") or {}).get("gpu") or (run.get("meta") or {}).get("cpu") or dev
+        for m, r in (run.get("models") or {}).items():
+            for b, x in sorted((r.get("batches") or {}).items(), key=lambda kv: int(kv[0])):
+                mem = x.get("mem_bytes")
+                rows.append([f"ours ({where}): {_BENCH_LABELS.get(m, m)}", b, fmt(x.get("t_ms")),
+                             fmt(x.get("t_query_ms")), fmt(None if mem is None else mem / MIB) + " MiB",
+                             fmt((x.get("params") or 0) / 1e6 or None), x.get("mem_kind", "not recorded")])
+            skipped += [f"- {dev}: {m}, B = {b}: {why}" for b, why in (r.get("skipped_batches") or {}).items()]
+            if r.get("status") not in (None, "ok"):
+                skipped.append(f"- {dev}: {m}: {r.get('status')} {r.get('error', '')}".rstrip())
+    for k in ("volsmpl", "coap"):
+        rows.append([f"paper: {paper_tables.TABLES['1']['row_labels'][k]}", "not stated", fmt_paper(t1[k]["t_ms"]), "-",
+                     f"{fmt_paper(t1[k]['gpu_gb'])} GB", "-", "GPU memory"])
+    out = [paper_caption("1") + " Time and memory of 60k query points.", ""]
+    out += md_table(["row", "B", "t [ms]", "t query [ms]", "memory", "params [M]", "memory kind"], rows)
+    out += ([""] + skipped if skipped else [])
+    rr = []
+    for pair, p_time, p_mem in (("coap/volsmpl", t1["coap"]["t_ms"] / t1["volsmpl"]["t_ms"],
+                                 t1["coap"]["gpu_gb"] / t1["volsmpl"]["gpu_gb"]),
+                                ("winding/volsmpl", c4["winding"]["t_ms"] / c4["volsmpl"]["t_ms"],
+                                 c4["winding"]["mem_gb"] / c4["volsmpl"]["mem_gb"])):
+        for dev, run in runs:
+            for b, x in ((run.get("ratios") or {}).get(pair) or {}).items():
+                rr.append([f"{pair} ({dev}), {'B = ' + b if b.isdigit() else b}", fmt(x.get("time")),
+                           fmt(x.get("time_query")), fmt(x.get("mem")), f"{p_time:.1f}", f"{p_mem:.1f}"])
+    if rr:
+        out += ["", "Ratios within one run beside the paper's (Tables 1 and C.4):", ""]
+        out += md_table(["ratio", "time", "time (cached encoding)", "memory", "paper time", "paper memory"], rr)
+    bb = d.get("bodybody")
+    if isinstance(bb, dict):
+        w, v = bb.get("winding") or {}, bb.get("volsmpl") or {}
+        mem = lambda x: fmt(None if x.get("mem_bytes") is None else x["mem_bytes"] / MIB) + " MiB"  # noqa: E731
+        gb = lambda k: f"{fmt_paper(c4[k]['mem_gb'])} GB"  # noqa: E731
+        out += ["", paper_caption("C.4") + f" {fmt(bb.get('vertices_tested'))} vertices of one body inside another; "
+                f"agreement {fmt(bb.get('agreement'))}.", ""]
+        out += md_table(["row", "t [ms]", "t cached encoding [ms]", "memory"], [
+            ["ours: winding numbers (libigl)", fmt(w.get("t_ms")), "-", mem(w)],
+            ["ours: VolumetricSMPL", fmt(v.get("t_ms")), fmt(v.get("t_query_ms")), mem(v)],
+            ["paper: Winding Numbers", fmt_paper(c4["winding"]["t_ms"]), "-", gb("winding")],
+            ["paper: VolumetricSMPL", fmt_paper(c4["volsmpl"]["t_ms"]), "-", gb("volsmpl")]])
+    acc = d.get("accuracy") or {}
+    if acc:
+        out += ["", "Accuracy in the same run: " + ", ".join(
+            f"{m} IoU mean {fmt((a.get('metrics') or {}).get('iou_mean', 0) * 100)} % ({a.get('status')})"
+            for m, a in acc.items()) + "."]
+    for dev, run in runs:
+        if run.get("notes"):
+            out += ["", f"Notes of the {dev} run:", ""] + [f"- {n}" for n in run["notes"]]
+    return out
+
+
+def selfpen_section(ctx) -> list[str]:
+    """Table 6 from `volsmpl selfpen` (results 'selfpen', 'selfpen_seeds', 'selfpen_tune')."""
+    res = ctx["results"]
+    d, seeds, tune = res.get("selfpen") or {}, res.get("selfpen_seeds"), res.get("selfpen_tune")
+    groups = []
+    for m, s in (get_path(seeds, "mean_over_seeds") or {}).items():
+        groups.append((f"{m}, mean over {len(seeds.get('per_seed') or {}) or 'all'} seeds", m, s))
+    seed = get_path(d, "config.seed")
+    for m, s in (d.get("summary") or {}).items():
+        groups.append((f"{m}, seed {seed if seed is not None else 'not recorded'}", m, s))
+    extra = ["collisions_before", "collidable_before", "collidable_after", "pose_change_deg", "removed_per_s"]
+    out = summary_table("6", groups, key_map={"collisions": "collisions_after"}, extra=extra)
+    kinds = sorted({s.get("memory_kind") for _, _, s in groups if s.get("memory_kind")})
+    out += ["", f"Ours: preset {d.get('preset', 'not recorded')}, memory {', '.join(kinds) or 'not recorded'}; "
+                "triangle collisions after repair (pose-induced pairs; the paper counts PROX meshes)."]
+    out += paper_mismatch(d, "6")
+    if isinstance(tune, dict):
+        best = tune.get("best") or {}
+        ran = {k: (d.get("config") or {}).get(k) for k in best}
+        out += ["", f"Tuning run: {len(tune.get('rows') or [])} settings over {len(tune.get('cases') or [])} cases; "
+                    f"best {best}" + ("." if ran == best else f"; the table above ran {ran} (its preset).")]
+    return out
+
+
+def summary_section(ctx) -> list[str]:
+    """Any app writing OUT/results.json with `summary.<back-end>` = {metric: value} (back-ends 'volsmpl', 'coap',
+    'mesh', ...): one table per paper table of the section; a back-end goes to the first table with a row of its
+    key (e.g. 'coap_w0.1' to Table D.1), else to the first. Metric keys named as the paper's column keys line up
+    with the paper's columns; other numeric metrics follow as extra columns."""
+    name, tids = ctx["name"], list(ctx["paper"])
+    d = ctx["results"].get(name) or {}
+    summary = d.get("summary") or {}
+    if not isinstance(summary, dict) or not summary:
+        return ["The result has no `summary` dict (back-end -> metrics): nothing to tabulate."]
+    assign = {tid: [] for tid in tids}
+    for backend, s in summary.items():
+        if isinstance(s, dict):
+            tid = next((t for t in tids if backend in paper_tables.TABLES[t]["rows"]), tids[0])
+            assign[tid].append((backend, backend, s))
+    out = []
+    for tid in tids:
+        key_map = paper_tables.TABLES[tid].get("our_keys")
+        out += ([""] if out else []) + summary_table(tid, assign[tid], key_map) + paper_mismatch(d, tid)
+    out += tuning_note(d.get("tuning"))
+    n = n_cases(d)
+    if n is not None:
+        out += ["", f"{n} per-case records in the result (`cases`)."]
+    return out
+
+
+def paired_table(p) -> list[str]:
+    """The paired differences of an app's compared rows (`paired`: volsmpl.apps.motion.stats) as a Markdown table;
+    none without them."""
+    if not isinstance(p, dict) or not p.get("pairs"):
+        return []
+    rows = [[f"{q['a']} - {q['b']}", m, fmt(v["mean_a"]), fmt(v["mean_b"]),
+             f"{v['mean_diff']:+.4g} [{v['ci'][0]:+.4g}, {v['ci'][1]:+.4g}]",
+             f"{v['a_lower']:.0%} / {v['a_higher']:.0%}", str(q["n"])]
+            for q in p["pairs"] for m, v in q["metrics"].items()]
+    head = [f"Paired over the same cases ({p.get('method', 'bootstrap')}, {p.get('confidence', 0.95):.0%} interval; "
+            f"{p.get('diff', 'a - b')}):", ""]
+    return head + md_table(["a - b", "metric", "mean a", "mean b", "a - b [interval]", "a lower / higher", "n"], rows)
+
+
+def motion_section(ctx) -> list[str]:
+    """Tables 5 and D.1 from `volsmpl motion` (summary_section) and the paired differences of its compared rows
+    (results 'motion_paired', else the result's own `paired`)."""
+    res = ctx["results"]
+    table = paired_table(res.get("motion_paired") or (res.get("motion") or {}).get("paired"))
+    return summary_section(ctx) + ([""] + table if table else [])
+
+
+def tuning_note(t) -> list[str]:
+    """The lines saying which rows a result tuned on which cases (`tuning`: tune_scenes, test_scenes, choice
+    {back-end: weight}, criterion); none without it."""
+    if not isinstance(t, dict) or not t.get("test_scenes"):
+        return []
+    choice = ", ".join(f"{m} w = {w:g}" for m, w in (t.get("choice") or {}).items())
+    tune, test = ", ".join(t.get("tune_scenes") or []), ", ".join(t["test_scenes"])
+    crit = t.get("criterion", "not recorded")
+    if t.get("protocol") == "tuned":
+        return ["", f"Protocol 'tuned': the rows named by back-end cover the test cases only ({test}), each at the "
+                    f"weight that scored best on the tuning cases ({tune}): {choice}; rows `*_w<w>` are the sweep "
+                    f"over the tuning cases. Criterion: {crit}."]
+    return ["", f"Rows `*_test`: the test cases only ({test}), each back-end at the weight that scored best on the "
+                f"tuning cases ({tune}): {choice}; criterion: {crit}."]

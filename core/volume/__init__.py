@@ -1,0 +1,18 @@
+"""Volumes attached to a body: the model registry, the shared `BodyVolume` answers (one sign convention), the
+learned `Volume` (VolumetricSMPL, COAP), the exact 'mesh' kind, and what they share (collision and
+self-penetration reductions, input checks, mesh extraction, the encoding cache, reduced precision, code
+refinement). `volume.engine` holds the query engine's internals.
+
+    vol = attach_volume(body, model="coap")         # any registered kind: "volsmpl", "coap", "mesh"
+    d = vol.signed(out, points)                     # (B, N): negative inside
+"""
+from volsmpl.volume.api import BodyVolume
+from volsmpl.volume.attach import attach_volume
+from volsmpl.volume.collision import reduce_penetration
+from volsmpl.volume.learned import Volume
+from volsmpl.volume.mesh_kind import MeshVolume
+from volsmpl.volume.models import MODELS, ModelKind, checkpoint_model, learned_models, model_kind, parse_models
+from volsmpl.volume.precision import PRECISIONS
+
+__all__ = ["MODELS", "PRECISIONS", "BodyVolume", "MeshVolume", "ModelKind", "Volume", "attach_volume",
+           "checkpoint_model", "learned_models", "model_kind", "parse_models", "reduce_penetration"]
