@@ -1,10 +1,10 @@
-"""Gather `volsmpl selfpen` runs that differ only in the point sampler's seed into one JSON (docs/selfpen_cpu_seeds.json,
+"""Gather `volsmpl selfpen` runs that differ only in the point sampler's seed into one JSON (docs/selfpen/seeds.json,
 read by `volsmpl report`): each seed's summary per model, the mean over seeds of the time, memory, iteration and
 collision columns, and the ratio of triangle collisions removed per second of repair, VolumetricSMPL over COAP.
 
     for s in 0 1 2 3; do volsmpl selfpen --model volsmpl,coap --seed $s --threads 1 --out out/selfpen_seed$s; done
     python tools/selfpen_seeds.py out/selfpen_seed0 out/selfpen_seed1 out/selfpen_seed2 out/selfpen_seed3 \
-        --command "volsmpl selfpen --model volsmpl,coap --seed S --threads 1 (S = 0..3)" --out docs/selfpen_cpu_seeds.json
+        --command "volsmpl selfpen --model volsmpl,coap --seed S --threads 1 (S = 0..3)" --out docs/selfpen/seeds.json
 """
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("folders", nargs="+", help="output folders of `volsmpl selfpen` runs (one per seed)")
     p.add_argument("--command", required=True, help="the command line of the runs, for the record")
-    p.add_argument("--out", default="docs/selfpen_cpu_seeds.json")
+    p.add_argument("--out", default="docs/selfpen/seeds.json")
     a = p.parse_args(argv)
     try:
         res = gather(a.folders, a.command)

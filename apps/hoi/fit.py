@@ -50,7 +50,7 @@ class FitConfig:
     w_pen: float = 1e4
     w_pen_mesh: float = 1e3
     w_scale: float = 1e3
-    # tuned: docs/hoi_tune.json (the first 13 tuning cases, one of each kind, volsmpl; 1e5 / 1e6 / 1e7; the lowest
+    # tuned: docs/hoi/tune.json (the first 13 tuning cases, one of each kind, volsmpl; 1e5 / 1e6 / 1e7; the lowest
     # mean contact_cm + obj_trans_err_cm + collision_pct)
     w_keypoints: float = 1e6
     w_silhouette: float = 1e6

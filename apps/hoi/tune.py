@@ -1,6 +1,6 @@
 """Tuning of the human–object weights that the paper does not give (the image terms), on the database's tuning half.
 
-    python -m volsmpl.apps.hoi.tune --cases 13 --grid 1e4,1e5,1e6,1e7 --model volsmpl --threads 1 --out docs/hoi_tune.json
+    python -m volsmpl.apps.hoi.tune --cases 13 --grid 1e4,1e5,1e6,1e7 --model volsmpl --threads 1 --out docs/hoi/tune.json
 
 Every grid value sets both image weights (keypoints and silhouette); each model kind fits the first --cases of the
 'tune' split (13: one case of each kind) at the paper's settings otherwise. The score of a value is the mean over
@@ -45,7 +45,7 @@ def main(argv=None) -> int:
     p.add_argument("--db", default=None)
     p.add_argument("--iters", type=int, default=FitConfig().iters)
     p.add_argument("--threads", type=int, default=None)
-    p.add_argument("--out", default="docs/hoi_tune.json")
+    p.add_argument("--out", default="docs/hoi/tune.json")
     args = p.parse_args(argv)
     check_writable(args.out, "file", "--out")
     if args.threads:

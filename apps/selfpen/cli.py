@@ -41,7 +41,7 @@ def add_parser(sub):
     p.add_argument("--checkpoint-coap", default=None, help="trained COAP checkpoint")
     p.add_argument("--random-init", action="store_true", help="random network weights (pipeline check only)")
     p.add_argument("--preset", default="tuned", choices=sorted(PRESETS),
-                   help="hyper-parameter set: 'tuned' (our tuning run, docs/selfpen_tune.json) or 'paper' "
+                   help="hyper-parameter set: 'tuned' (our tuning run, docs/selfpen/tune.json) or 'paper' "
                         "(lr 1e-5, prior 1e3, self-penetration 0.1); the options below override it")
     p.add_argument("--lr", type=float, default=None, help=f"SGD learning rate (tuned {d.lr:g}, paper 1e-5)")
     p.add_argument("--max-iters", type=int, default=d.max_iters, help=f"iteration cap (paper {d.max_iters})")

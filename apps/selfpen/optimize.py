@@ -39,7 +39,7 @@ PAPER = paper.rows("selfpen")
 
 # The paper's values (Sec. 4.2.4: lr 1e-5, pose-prior weight 1e3, self-penetration weight 0.1, stop on the first
 # empty draw, the SDF read in metres: tau 1, plain SGD) and the values of our one tuning run for both models
-# (apps/selfpen/tune.py, all 17 cases, docs/selfpen_tune.json): the paper's lr * w_prior (1e-2) kept, the SDF read in
+# (apps/selfpen/tune.py, all 17 cases, docs/selfpen/tune.json): the paper's lr * w_prior (1e-2) kept, the SDF read in
 # centimetres (tau 1 cm: the sharpness of COAP's occupancy), every step limited to 0.1 rad per joint (plain SGD flung
 # bodies: one step could move the spine by tens of degrees), lr * w_selfpen 0.03 (the best mean of 1e-3 .. 0.3 for both
 # models: 0.1 with the COAP shipped before its catch-up, 0.03 since; 2026-11-25 run), 3 empty draws to stop, a stall stop after 10 steps without a new low (10 % below the best), and no backward

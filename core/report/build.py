@@ -92,15 +92,15 @@ SECTIONS: dict[str, Section] = {
         rs.bench_section, (), _CKPTS),
     "selfpen": Section(
         "Self-intersection repair", ("6",), ("apps/selfpen",),
-        {"selfpen": ("docs/selfpen_cpu.json", "out/selfpen/results.json"),
-         "selfpen_seeds": "docs/selfpen_cpu_seeds.json",
-         "selfpen_tune": "docs/selfpen_tune.json"},
+        {"selfpen": ("docs/selfpen/results.json", "out/selfpen/results.json"),
+         "selfpen_seeds": "docs/selfpen/seeds.json",
+         "selfpen_tune": "docs/selfpen/tune.json"},
         {"selfpen": "volsmpl selfpen --model volsmpl,coap,mesh --out out/selfpen && "
-                    "cp out/selfpen/results.json docs/selfpen_cpu.json",
+                    "cp out/selfpen/results.json docs/selfpen/results.json",
          "selfpen_seeds": "for S in 0 1 2 3; do volsmpl selfpen --model volsmpl,coap --seed $S --out out/selfpen_s$S; "
-                          "done  # means over the seeds: docs/selfpen_cpu_seeds.json",
-         "selfpen_tune": "python -m volsmpl.apps.selfpen.tune --out docs/selfpen_tune.json"},
-        rs.selfpen_section, ("docs/selfpen_hands_through_thighs.png", "docs/selfpen_arm_through_head.png"), _CKPTS),
+                          "done  # means over the seeds: docs/selfpen/seeds.json",
+         "selfpen_tune": "python -m volsmpl.apps.selfpen.tune --out docs/selfpen/tune.json"},
+        rs.selfpen_section, ("docs/selfpen/hands_through_thighs.png", "docs/selfpen/arm_through_head.png"), _CKPTS),
     "hoi": _app("hoi", ("3",), "Human-object reconstruction"),
     "egohmr": _app("egohmr", ("4",), "Human mesh recovery in 3D scenes (EgoHMR)"),
     "motion": _app("motion", ("5", "D.1"), "Scene-constrained motion synthesis", rs.motion_section,

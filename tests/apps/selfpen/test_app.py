@@ -322,7 +322,7 @@ def test_cli_end_to_end_random_init(tmp_path):
 def test_repaired_case_has_fewer_collisions(body):
     vol = volsmpl.attach_volume(body)
     case = C.load_cases(names=["forearm_through_torso_left"])[0]
-    # the tuned defaults (docs/selfpen_tune.json); the paper's values leave our body where it is
+    # the tuned defaults (docs/selfpen/tune.json); the paper's values leave our body where it is
     r = repair_case(body, vol, case, SelfPenConfig())
     assert r.iterations > 0 and r.collisions_after < r.collisions_before
     assert 0 < r.collidable_before <= r.collisions_before and r.collidable_after < r.collidable_before
