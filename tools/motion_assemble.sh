@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# Assemble the motion table (issue 25) once all its sequences are stored, and make the checks that keep it current.
+# Assemble the motion table once all its sequences are stored, and make the checks that keep it current.
 #
 #     bash tools/motion_assemble.sh            # refuses while sequences are missing (it would compute them)
 #     bash tools/motion_assemble.sh --force    # assemble anyway (the missing ones are computed now: hours)
 #
-# The table runs from an export of fea400e (checkpoints/README.md, "Long app tables"): per-sequence records are keyed
-# by the code that made them, so the assembly runs from the same export and reuses every record. Then:
+# The table runs from an export of fea400e (tools/export_snapshot.sh): per-sequence records are keyed by the code
+# that made them, so the assembly runs from the same export and reuses every record (the 440 records of the table
+# are tracked in docs/motion/cases/). Then:
 #   1. results.json and the figures from the export (all records reused; COAP as published measured once), copied
 #      to docs/motion/;
 #   2. the chained re-run check (volsmpl.report.result_check.chain_check): two sequences of rooms 0 and 1 (COAP at w = 0.1,
@@ -34,11 +35,11 @@ CHECK=(--protocol paper --scenes 2 --sequences 2 --w coap=0.1 --frames 80 --iter
 
 [ -d "$SNAP/volsmpl" ] || tools/export_snapshot.sh "$SNAP" fea400e
 mkdir -p "$OUT/cases"
-cp -n checkpoints/motion_tuned/cases/*.json "$OUT/cases/" 2>/dev/null || true
+cp -n docs/motion/cases/*.json "$OUT/cases/" 2>/dev/null || true
 have=$(ls "$OUT/cases" | wc -l)
 if [ "$have" -lt "$EXPECTED" ] && [ "${1:-}" != "--force" ]; then
     echo "motion_assemble: $have of $EXPECTED sequences stored in $OUT/cases; let the table's processes finish" \
-         "(checkpoints/README.md) or pass --force to compute the rest now" >&2
+         "(docs/motion/cases/ holds the table's records) or pass --force to compute the rest now" >&2
     exit 1
 fi
 
