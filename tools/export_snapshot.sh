@@ -3,7 +3,7 @@
 # of the checkout (its per-case records are keyed by the source it runs: volsmpl.io.case_store):
 #     tools/export_snapshot.sh DIR [COMMIT]      # default COMMIT: HEAD
 #     PYTHONPATH=DIR python -m volsmpl.cli motion ... --resume
-# The same commit exported again (another session) gives the same source digest, so --resume continues its
+# The same commit exported again (later, or on another machine) gives the same source digest, so --resume continues its
 # records; DIR/volsmpl/SOURCE_COMMIT names the commit, which results then record as meta.git_commit.
 set -euo pipefail
 dir=${1:?usage: tools/export_snapshot.sh DIR [COMMIT]}

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The GPU checklist, run on a lent device machine (a bare image with CUDA torch and no open3d) from the repo root:
-#     tools/gpu_checks.sh session            # one call for a whole session (~9 min): cuda tests, bench, profile, CUDA-graph probe,
+# The GPU checklist, run on a GPU machine (a bare image with CUDA torch and no open3d) from the repo root:
+#     tools/gpu_checks.sh session            # the whole checklist in one call (~9 min): cuda tests, bench, profile, CUDA-graph probe,
 #                                            # selfpen, motion's cost and the training step's breakdown on CUDA
 #     tools/gpu_checks.sh checks             # cuda-marked tests and selfpen on CUDA
 #     tools/gpu_checks.sh bench              # `volsmpl bench --device cuda` (B = 1, 8; 60k points)
@@ -102,7 +102,7 @@ train)
         step train_probe 300 $V train --resume --out "$run" --device cuda --max-steps 20
     fi
     sps=$(tail -n 1 "$run/log.csv" | cut -d, -f6)
-    # 0.8: the step time drifts (0.22 -> 0.29 s over one session's chunks); the limit keeps the tarball below
+    # 0.8: the step time drifts (0.22 -> 0.29 s over three consecutive calls); the limit keeps the tarball below
     n=$(python3 -c "print(max(0, int(0.8 * ($end - $SECONDS - 40) / max(float('$sps'), 1e-3))))")
     echo "== $sps s/step over the probe's last window: $n more steps"
     if python3 -c "import sys; sys.exit(0 if float('$sps') > float('${MAX_SPS:-1.0}') else 1)"; then
