@@ -120,7 +120,7 @@ def test_query_host_syncs_on_cuda(precision, call, most):
     """On CUDA a query on an encoding synchronises with the host once (the lean path's read of its pair counts);
     `query` at most three times: the encoding cache's fingerprint, the check that the cached encoding has every
     part a point needs (a subset encoding here), and that one read, which also counts NaN and Inf points (the
-    H100 run of 2026-11-26 counted 5: two fingerprints and a finiteness check of their own)."""
+    H100 run of 508d1c0 counted 5: two fingerprints and a finiteness check of their own)."""
     import warnings
 
     body = volsmpl.create_body().cuda()

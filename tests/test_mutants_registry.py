@@ -1,5 +1,5 @@
 """The registry of named mutants (tools/mutants.py, `make mutants`) stays applicable as the code moves: each mutant's
-text occurs exactly once in its file (five had silently stopped matching after code moved between modules), its
+text occurs exactly once in its file (code moved between modules otherwise leaves a mutant silently unapplied), its
 replacement differs, and every test it names exists. Reads files only; running the mutants is `make mutants`."""
 from __future__ import annotations
 

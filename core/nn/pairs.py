@@ -109,7 +109,7 @@ def check_pairs(x_local: torch.Tensor, body_idx: torch.Tensor, part_idx: torch.T
     if body_idx.dtype not in (torch.int64, torch.int32) or part_idx.dtype not in (torch.int64, torch.int32):
         raise TypeError("decode_pairs: body_idx and part_idx must be integer (int64) tensors")
     if M and bounds:
-        # one host sync for the four bounds (four on a GPU before)
+        # one host sync for the four bounds, not one each
         bmin, bmax, pmin, pmax = torch.stack([body_idx.min(), body_idx.max(), part_idx.min().to(body_idx.dtype),
                                               part_idx.max().to(body_idx.dtype)]).tolist()
         if bmin < 0 or bmax >= B or pmin < 0 or pmax >= K:

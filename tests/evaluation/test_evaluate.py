@@ -309,8 +309,8 @@ def test_cli_end_to_end(body, tiny_config, tmp_path, capsys):
     (["--split", "self_contact", "--timing"], ["--timing", "--split standard or all"]),
 ])
 def test_cli_cache_dir_and_timing_checked_before_the_work(tmp_path, capsys, monkeypatch, argv, words):
-    """--cache-dir naming a file was found only after the ground truth had been computed (minutes on 64 bodies), as
-    '[Errno 17] File exists'; --split self_contact --timing dropped the timing silently. Both stop in one line first."""
+    """--cache-dir naming a file, and --split self_contact with --timing (which would drop the timing silently), stop
+    in one line before any work, not after the ground truth (minutes on 64 bodies) as '[Errno 17] File exists'."""
     from volsmpl.cli import main
 
     def no_work(*a, **k):

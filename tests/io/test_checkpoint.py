@@ -152,7 +152,7 @@ def test_config_dict_round_trip_and_unknown_keys():
         VolumeConfig(skip_layers=(9,))
 
 
-# ---------------------------------------------------------------- digests and non-finite weights (issue 27)
+# ---------------------------------------------------------------- digests and non-finite weights
 def test_damaged_weights_same_size_refused(tmp_path):
     _save(tmp_path)
     p = tmp_path / "model.safetensors"

@@ -47,8 +47,8 @@ def test_sample_surface_subset_and_errors():
 
 
 def test_sample_surface_refuses_face_indices_outside_the_mesh():
-    """faces=[0, 1, 12, -1] on the 12-face box sampled faces 0 and 1 only (12 and -1 silently dropped), and
-    faces=[0.5, 1.7] said 'zero total area'; both now stop in one line naming the problem."""
+    """faces=[0, 1, 12, -1] on the 12-face box (unchecked: faces 0 and 1 sampled, 12 and -1 silently dropped) and
+    faces=[0.5, 1.7] (unchecked: 'zero total area') both stop in one line naming the problem."""
     box = trimesh.creation.box()
     with pytest.raises(ValueError, match=r"face indices must be in 0\.\.11 \(the mesh has 12 faces\), got -1\.\.12"):
         sample_surface(box, 10, faces=[0, 1, 12, -1])

@@ -300,7 +300,7 @@ def test_worker_processes_give_the_serial_batches(tmp_path):
         TrainConfig(num_workers=-1)
 
 
-# ------------------------------------------------------------------ training on any device (issue 26, items 1-2)
+# ------------------------------------------------------------------ training on any device
 def test_torch_ground_truth_batch_matches_open3d(body):
     """gt_backend='torch' gives the open3d batch: same points, exact signs away from the surface, distances to 1e-6 m."""
     pytest.importorskip("open3d")
@@ -401,11 +401,11 @@ def test_cli_set_takes_string_values_and_config_errors_name_the_file(tmp_path, c
 
 
 def test_cli_resume_and_init_take_the_checkpoints_training_config(tmp_path, capsys):
-    """A run folder holding only a copied checkpoint folder (checkpoints/README.md: mkdir, cp -r ckpt-N, echo > latest)
-    resumed with the default config, not the run's (refused here only because the model config differed; with the
-    default network the run went on with batch 8, 450k steps, ...); `--init CKPT.json` looked for CKPT.json.json;
-    `--init CKPT --set k=v` trained on the defaults, not on the checkpoint's config. All three now start from the
-    checkpoint's recorded training config (meta.training.train_config), --set on top."""
+    """A run folder holding only a copied checkpoint folder (mkdir, cp -r ckpt-N, echo ckpt-N > latest) resumes with
+    the checkpoint's training config, not the defaults (with which the run would be refused for its model config, or
+    go on with the default network, batch 8, 450k steps, ...); `--init CKPT.json` takes the path as given (not
+    CKPT.json.json); `--init CKPT --set k=v` trains on the checkpoint's config, not the defaults. All three start
+    from the checkpoint's recorded training config (meta.training.train_config), --set on top."""
     import shutil
 
     from volsmpl.cli import main

@@ -131,7 +131,7 @@ def test_weight_edits_invalidate(tiny_config, how):
 
 def test_encoder_arithmetic_switch_re_encodes(tiny_config):
     """Switching the encoder to bfloat16 (`net.encoder_bf16`, as training runs it) and back changes the codes
-    without changing a tensor: the cache must not serve the codes made the other way (it did before 2026-11-27),
+    without changing a tensor: the cache must not serve the codes made the other way (as a key without it would),
     neither on the same output nor on an equal new one."""
     b, vol = _fresh_volume(tiny_config, 7)
     p = random_pose(1, seed=26)

@@ -339,10 +339,10 @@ def test_empty_and_bad_points(vbody):
 
 @pytest.mark.parametrize("model", ["volume", "mesh"])
 def test_output_of_unbatched_or_mixed_fields_refused(vbody, model):
-    """A hand-made output whose fields are not one batch failed deep inside ("shape '[72, -1, 3]' is invalid",
-    open3d's 'Tensor has shape {3}', 'stack expects a non-empty TensorList') or was answered silently: the mesh kind's
-    selfpen_loss gave 1 value for vertices of 2 bodies beside joints and full_pose of 1. Every entry now refuses it
-    in one line naming the shapes."""
+    """A hand-made output whose fields are not one batch is refused in one line naming the shapes by every entry.
+    Unchecked, it fails deep inside ("shape '[72, -1, 3]' is invalid", open3d's 'Tensor has shape {3}', 'stack
+    expects a non-empty TensorList') or is answered silently: the mesh kind's selfpen_loss gives 1 value for
+    vertices of 2 bodies beside joints and full_pose of 1."""
     from types import SimpleNamespace
     vol = vbody.volume if model == "volume" else volsmpl.attach_volume(volsmpl.create_body(), model="mesh")
     with torch.no_grad():

@@ -1,8 +1,8 @@
-"""Independent references for the steps a planted bug once slipped past every test (issue 27), all on random
-weights, none needing the trained checkpoint: the encoder against a plain re-implementation, the padded part boxes
-against the tight box of the part's vertices, the evaluation's near-surface spread against the exact distance to
-the mesh, collision_loss against relu(-query), query against query_parts and the box test, and the self-penetration
-loss against a field and sums written by hand."""
+"""Independent references for the steps where a planted bug (tools/mutants.py) slipped past every other test, all on
+random weights, none needing the trained checkpoint: the encoder against a plain re-implementation, the padded part
+boxes against the tight box of the part's vertices, the evaluation's near-surface spread against the exact distance
+to the mesh, collision_loss against relu(-query), query against query_parts and the box test, and the
+self-penetration loss against a field and sums written by hand."""
 from __future__ import annotations
 
 import copy
