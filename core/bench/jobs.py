@@ -205,7 +205,7 @@ def build_volume(body, spec: dict):
     optional 'engine' (Volume.engine, default 'lean'), optional 'precision' (Volume.set_precision, default 'full'),
     optional 'one_chunk' (True: every query in one chunk, decoders in their batched one-pass form), optional 'pair_decoder'
     (Volume.pair_decoder; None: the Volume's default), optional 'cuda_graphs' (Volume.cuda_graphs), 'cuda_graph_queries'
-    (Volume.cuda_graph_queries)}."""
+    (Volume.cuda_graph_queries)}: a benchmark variant's `Variant.spec` (volsmpl.bench.variants)."""
     from volsmpl.volume.attach import attach_volume
 
     if spec.get("checkpoint"):

@@ -9,19 +9,11 @@ This module holds the settings (`BenchConfig`), the run (`run_bench`) and the CL
 in a fresh Python process, are in `volsmpl.bench.jobs`, the ratios and tables in `volsmpl.bench.summary`.
 The result JSON records where and when it ran under 'meta' (`volsmpl.io.provenance.machine_info`).
 
-Models (`MODELS`): 'volsmpl' (sparse engine: decoders only on (point, part) pairs inside part boxes, lean
-query path), 'volsmpl-chunked' (the same on the engine before issue 28: `Volume.engine`, `ENGINES`),
-'volsmpl-dense' (the reference path: every part decoder on every point), 'coap' (COAP as published: every part
-on every point, i.e. dense), 'coap-sparse' (COAP's network on the sparse engine), and 'volsmpl-bf16' /
-'volsmpl-tf32' (the sparse engine in a reduced precision, `PRECISIONS`, `Volume.set_precision`; tf32 on CUDA only;
-their accuracy columns are measured in that precision), 'volsmpl-tiles' / 'volsmpl-grouped' (the sparse engine
-with that pair decoder, `PAIR_DECODERS`, `Volume.pair_decoder`, whichever the default is), 'volsmpl-onechunk'
-(the lean path with the whole batch in one chunk and the decoders' batched one-pass form, `ONE_CHUNK`: its operator calls do not
-depend on B; the default 'volsmpl' keeps cache-sized chunks on the CPU, one body per chunk at 60k points),
-'volsmpl-eager' (the no-grad encode run op by op, `EAGER_ENCODE`: `Volume.cuda_graphs` off; the default 'volsmpl'
-replays it from a CUDA graph on a GPU; on a CPU the two are the same) and 'volsmpl-qgraph' (the no-grad lean query
-replayed from a CUDA graph too, `GRAPH_QUERIES`, `Volume.cuda_graph_queries`; on a CPU the same as 'volsmpl'). A
-model whose `attach_volume(body, model=...)` is not available is skipped with a note.
+Variants (`--models`): the names of `volsmpl.bench.variants.VARIANTS`, each a registry model kind ('volsmpl',
+'coap') with the `Volume` settings it runs with (the sparse or dense path, the engine, the pair decoder, the
+precision, one chunk, CUDA graphs of the encode and of the query); the table's notes say what each measures. A
+variant whose `attach_volume(body, model=...)` is not available is skipped with a note, as is a CUDA-only variant
+off CUDA.
 
 A run measures:
   - the machine's fp32 matmul rate (`bench_jobs.matmul_rate`);
@@ -56,50 +48,20 @@ import torch
 
 from volsmpl.bench.jobs import bodybody_inputs, make_frames, matmul_rate, run_job
 from volsmpl.bench.summary import PAPER, caveats, compute_ratios, format_report, to_markdown
+from volsmpl.bench.variants import DEFAULT_VARIANTS, KINDS, VARIANTS
 from volsmpl.io.provenance import machine_info
 
-__all__ = ["MODELS", "ENGINES", "PRECISIONS", "PAIR_DECODERS", "ONE_CHUNK", "EAGER_ENCODE", "GRAPH_QUERIES", "BenchConfig",
-           "model_available",
+__all__ = ["VARIANTS", "BenchConfig", "model_available",
            "checkpoint_for", "bench_model",
            "bench_batch_scaling", "bench_bodybody", "evaluate_protocol_check", "accuracy", "run_bench", "estimate_call_s", "estimate_mem_bytes",
            "add_parser", "config_from_args", "run", "PAPER", "compute_ratios", "format_report", "to_markdown"]
-
-#: benchmark model name -> (model given to attach_volume, dense query path)
-MODELS: Dict[str, Tuple[str, bool]] = {
-    "volsmpl": ("volsmpl", False),
-    "volsmpl-dense": ("volsmpl", True),  # the paper's implementation: every part on every point, one pass
-    "coap": ("coap", True),          # COAP as published evaluates every part on every point, in one pass
-    "coap-sparse": ("coap", False),  # COAP's network on our sparse engine
-    "volsmpl-chunked": ("volsmpl", False),  # the sparse engine before issue 28: padded chunks, dense box distances
-    "volsmpl-bf16": ("volsmpl", False),     # the sparse engine with bfloat16 decoder layers (Volume.set_precision)
-    "volsmpl-tf32": ("volsmpl", False),     # the sparse engine with TF32 matmuls (CUDA only)
-    "volsmpl-onechunk": ("volsmpl", False),  # the lean path in one chunk per query, decoders in one batched pass
-    "volsmpl-tiles": ("volsmpl", False),     # the sparse engine with the tiled pair decoder (Volume.pair_decoder)
-    "volsmpl-grouped": ("volsmpl", False),   # the sparse engine with one grouped matmul per decoder layer
-    "volsmpl-eager": ("volsmpl", False),     # the no-grad encode op by op (Volume.cuda_graphs off)
-    "volsmpl-qgraph": ("volsmpl", False),    # the no-grad lean query replayed from a CUDA graph (cuda_graph_queries)
-}
-
-#: benchmark model name -> Volume.engine of its sparse path (default 'lean')
-ENGINES: Dict[str, str] = {"volsmpl-chunked": "chunked"}
-#: benchmark model name -> Volume precision (default 'full'); their accuracy is measured in that precision
-PRECISIONS: Dict[str, str] = {"volsmpl-bf16": "bf16", "volsmpl-tf32": "tf32"}
-#: benchmark model name -> Volume.pair_decoder (default: the Volume's own)
-PAIR_DECODERS: Dict[str, str] = {"volsmpl-tiles": "tiles", "volsmpl-grouped": "grouped"}
-#: benchmark models whose query runs as one chunk (no memory or cache chunks, no decoder tiles)
-ONE_CHUNK: Tuple[str, ...] = ("volsmpl-onechunk",)
-#: benchmark models whose no-grad encode runs op by op on a GPU (Volume.cuda_graphs off; the others replay a graph)
-EAGER_ENCODE: Tuple[str, ...] = ("volsmpl-eager",)
-#: benchmark models whose no-grad lean query replays a CUDA graph on a GPU (Volume.cuda_graph_queries)
-GRAPH_QUERIES: Tuple[str, ...] = ("volsmpl-qgraph",)
-
 
 @dataclass
 class BenchConfig:
     """Settings of one benchmark run (defaults: the full run of the module docstring).
 
     Attributes:
-        models: benchmark model names (keys of MODELS). batches: batch sizes B.
+        models: benchmark variant names (keys of VARIANTS). batches: batch sizes B.
         n_points: query points per body (60k as in Table 1). repeats / warmup: timed / untimed frames.
         threads: torch CPU threads (None: this process's torch.get_num_threads()). device: 'cpu' or 'cuda'.
         checkpoints: model ('volsmpl' / 'coap') -> checkpoint path; missing: the registry's shipped checkpoint if present.
@@ -120,7 +82,7 @@ class BenchConfig:
         timeout_s: limit of each subprocess.
     """
 
-    models: Tuple[str, ...] = ("volsmpl", "volsmpl-dense", "coap", "coap-sparse")
+    models: Tuple[str, ...] = DEFAULT_VARIANTS
     batches: Tuple[int, ...] = (1, 8)
     n_points: int = 60000
     repeats: int = 5
@@ -146,9 +108,9 @@ class BenchConfig:
 
     def __post_init__(self):
         self.models, self.batches = tuple(self.models), tuple(int(b) for b in self.batches)
-        unknown = [m for m in self.models if m not in MODELS]
+        unknown = [m for m in self.models if m not in VARIANTS]
         if unknown:
-            raise ValueError(f"unknown model(s) {unknown}; choose from {list(MODELS)}.")
+            raise ValueError(f"unknown model(s) {unknown}; choose from {list(VARIANTS)}.")
         if not self.models or not self.batches:
             raise ValueError("give at least one model and one batch size.")
         for name in ("n_points", "repeats", "n_bodies", "winding_repeats", "matmul_size", "matmul_repeats"):
@@ -165,7 +127,7 @@ class BenchConfig:
             _positive("BenchConfig.bodybody_vertices", self.bodybody_vertices)
         if self.device not in ("cpu", "cuda") and not str(self.device).startswith("cuda:"):
             raise ValueError(f"BenchConfig.device={self.device!r}: use 'cpu' or 'cuda'.")
-        bad = sorted(set(self.checkpoints) - {"volsmpl", "coap"})
+        bad = sorted(set(self.checkpoints) - set(KINDS))
         if bad:
             raise ValueError(f"checkpoints for {bad}: give them for 'volsmpl' or 'coap'.")
 
@@ -217,15 +179,10 @@ def check_given_checkpoints(cfg: BenchConfig) -> None:
 
 # ---------------------------------------------------------------------------------------------- measurements
 def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optional[str]) -> dict:
-    """Time, memory, parameters and decoder work of one benchmark model at one batch size (isolated process)."""
-    model, dense = MODELS[name]
+    """Time, memory, parameters and decoder work of one benchmark variant at one batch size (isolated process)."""
     n_frames = max(1, cfg.warmup + cfg.repeats)
     inputs = make_frames(body, batch, cfg.n_points, n_frames, cfg.seed)
-    job = {"spec": {"model": model, "dense": dense, "checkpoint": checkpoint, "init_seed": cfg.init_seed,
-                    "engine": ENGINES.get(name, "lean"), "precision": PRECISIONS.get(name, "full"),
-                    "one_chunk": name in ONE_CHUNK, "pair_decoder": PAIR_DECODERS.get(name),
-                    "cuda_graphs": name not in EAGER_ENCODE,
-                    "cuda_graph_queries": name in GRAPH_QUERIES},
+    job = {"spec": VARIANTS[name].spec(checkpoint, cfg.init_seed),
            "device": cfg.device, "threads": cfg.threads or torch.get_num_threads(), "warmup": cfg.warmup,
            "repeats": cfg.repeats, "budget_s": cfg.budget_s, "matmul_size": cfg.matmul_size}
     r = run_job("volsmpl.bench.jobs:volume_job", job, inputs, cfg.timeout_s)
@@ -236,7 +193,7 @@ def bench_model(name: str, batch: int, cfg: BenchConfig, body, checkpoint: Optio
 def bench_batch_scaling(cfg: BenchConfig, body, checkpoint: Optional[str]) -> dict:
     """'volsmpl' per body at the largest batch against B = 1, interleaved in one isolated process (bench_scaling)."""
     B = max(cfg.batches)
-    job = {"spec": {"model": "volsmpl", "dense": False, "checkpoint": checkpoint, "init_seed": cfg.init_seed},
+    job = {"spec": VARIANTS["volsmpl"].spec(checkpoint, cfg.init_seed),
            "device": cfg.device, "threads": cfg.threads or torch.get_num_threads(), "warmup": min(1, cfg.warmup),
            "repeats": cfg.repeats}
     return run_job("volsmpl.bench.scaling:batch_scaling_job", job, make_frames(body, B, cfg.n_points, 1, cfg.seed),
@@ -247,7 +204,7 @@ def bench_bodybody(cfg: BenchConfig, body, checkpoint: Optional[str]) -> dict:
     """Paper Table C.4: vertices of body A inside body B by winding numbers vs VolumetricSMPL (sparse)."""
     inp = bodybody_inputs(body, cfg.seed + 1, cfg.bodybody_vertices)
     threads = cfg.threads or torch.get_num_threads()
-    vjob = {"spec": {"model": "volsmpl", "dense": False, "checkpoint": checkpoint, "init_seed": cfg.init_seed},
+    vjob = {"spec": VARIANTS["volsmpl"].spec(checkpoint, cfg.init_seed),
             "device": cfg.device, "threads": threads, "warmup": cfg.warmup, "repeats": cfg.repeats, "return_pred": True}
     vol = run_job("volsmpl.bench.jobs:volume_job", vjob,
                   {"body_pose": inp["pose_b"][None], "transl": inp["transl_b"], "points": inp["points"][None]},
@@ -347,19 +304,20 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
     result["matmul"] = matmul_rate(cfg.matmul_size, cfg.matmul_repeats, cfg.device)
     available, ckpts = {}, {}
     for name in cfg.models:
-        base = MODELS[name][0]
+        variant = VARIANTS[name]
+        base = variant.kind
         if base not in available:
             available[base] = model_available(base)
             ckpts[base] = checkpoint_for(base, cfg) if available[base][0] else None
         ok, why = available[base]
-        if ok and PRECISIONS.get(name) == "tf32" and cfg.device != "cuda":
-            ok, why = False, "TF32 is a CUDA tensor-core mode (run with --device cuda)"
+        if ok and variant.cuda_only and cfg.device != "cuda":
+            ok, why = False, variant.cuda_only
         if not ok:
             result["models"][name] = {"status": "skipped", "note": why}
             result["notes"].append(f"{name}: skipped: {why}")
             log(f"{name}: skipped ({why})")
             continue
-        entry = {"status": "ok", "model": base, "dense": MODELS[name][1], "checkpoint": ckpts[base], "batches": {}}
+        entry = {"status": "ok", "model": base, "dense": variant.dense, "checkpoint": ckpts[base], "batches": {}}
         for batch in sorted(cfg.batches):
             note = _skip_note(name, batch, entry, cfg)
             if note is not None:
@@ -381,9 +339,10 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
             log("body-body occupancy (winding numbers vs volsmpl) ...")
             result["bodybody"] = bench_bodybody(cfg, body, ckpts["volsmpl"])
     result["accuracy"] = {}
-    reduced = [n for n in cfg.models if n in PRECISIONS and result["models"].get(n, {}).get("status") == "ok"]
+    reduced = [n for n in cfg.models
+               if VARIANTS[n].precision != "full" and result["models"].get(n, {}).get("status") == "ok"]
     for key, base, precision in [(b, b, "full") for b, (ok, _) in available.items() if ok] + \
-            [(n, MODELS[n][0], PRECISIONS[n]) for n in reduced]:   # reduced precision: its own accuracy
+            [(n, VARIANTS[n].kind, VARIANTS[n].precision) for n in reduced]:   # reduced precision: its own accuracy
         if not cfg.accuracy:
             result["accuracy"][key] = {"status": "skipped (--quick)"}
         else:
@@ -407,7 +366,7 @@ def add_parser(sub):
     p.add_argument("--repeats", type=int, default=d.repeats, help="timed runs (median reported)")
     p.add_argument("--warmup", type=int, default=d.warmup, help="untimed warm-up runs")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (1 gives stable timings on a busy machine)")
-    p.add_argument("--models", default=",".join(d.models), help=f"comma-separated, from {','.join(MODELS)}")
+    p.add_argument("--models", default=",".join(d.models), help=f"comma-separated, from {','.join(VARIANTS)}")
     p.add_argument("--checkpoint-volsmpl", default=None, help="trained volsmpl checkpoint (default: shipped one if present)")
     p.add_argument("--checkpoint-coap", default=None, help="trained COAP checkpoint (default: shipped one if present)")
     p.add_argument("--n-bodies", type=int, default=d.n_bodies, help="validation bodies for the accuracy columns")

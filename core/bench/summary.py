@@ -4,9 +4,9 @@ Markdown tables.
     from volsmpl.bench.summary import format_report, to_markdown
     print(format_report(result)); open("bench.md", "w").write(to_markdown(result))
 
-Ratios (`compute_ratios`) are taken within one run, per batch size, for the model pairs RATIO_PAIRS and
-for winding numbers / volsmpl in the body-body check, and shown next to the paper's (GPU) ratios in
-`PAPER`. The paper measured on a GPU; CPU numbers compare only with each other.
+Ratios (`compute_ratios`) are taken within one run, per batch size, for the variant pairs RATIO_PAIRS
+(volsmpl.bench.variants) and for winding numbers / volsmpl in the body-body check, and shown next to the
+paper's (GPU) ratios in `PAPER`. The paper measured on a GPU; CPU numbers compare only with each other.
 """
 from __future__ import annotations
 
@@ -16,18 +16,13 @@ from typing import List, Optional, Tuple
 
 from volsmpl.report import paper
 from volsmpl.bench.scaling import scaling_line, scaling_rows
+from volsmpl.bench.variants import RATIO_PAIRS
 
 __all__ = ["PAPER", "RATIO_PAIRS", "compute_ratios", "caveats", "model_rows", "ratio_rows", "bodybody_rows",
            "text_table", "markdown_table", "summary_lines", "format_report", "to_markdown"]
 
 #: the paper's figures (GPU, batch size not stated): Table 1 and supplementary Table C.4 (volsmpl.report.paper)
 PAPER = paper.bench_paper()
-
-#: (numerator, denominator) model pairs whose time and memory ratios are reported per batch size
-RATIO_PAIRS = [("coap", "volsmpl"), ("coap-sparse", "volsmpl"), ("volsmpl-dense", "volsmpl"), ("coap", "coap-sparse"),
-               ("volsmpl-chunked", "volsmpl"), ("volsmpl", "volsmpl-bf16"), ("volsmpl", "volsmpl-tf32"),
-               ("coap", "volsmpl-bf16"), ("coap", "volsmpl-tf32"), ("volsmpl-onechunk", "volsmpl"),
-               ("volsmpl-eager", "volsmpl"), ("volsmpl", "volsmpl-qgraph"), ("coap", "volsmpl-qgraph")]
 
 
 # ---------------------------------------------------------------------------------------------- ratios

@@ -198,16 +198,14 @@ def test_one_chunk_model_has_operator_calls_independent_of_batch():
     per (body, point range) and so more calls with more bodies; both give the same values."""
     import torch
 
-    from volsmpl.bench.run import MODELS, ONE_CHUNK
     from volsmpl.bench.jobs import build_volume, profile_query
+    from volsmpl.bench.variants import VARIANTS
 
     body = volsmpl.create_body()
     n = volsmpl.volume.learned.Volume.CPU_CHUNK_ELEMS // 16 + 5000  # just over one body's cache chunk: 2 point ranges
     counts, values = {}, {}
     for name in ("volsmpl", "volsmpl-onechunk"):
-        spec = {"model": MODELS[name][0], "dense": False, "checkpoint": None, "init_seed": 0,
-                "one_chunk": name in ONE_CHUNK}
-        vol = build_volume(body, spec)
+        vol = build_volume(body, VARIANTS[name].spec(checkpoint=None, init_seed=0))
         assert vol.num_parts == 16
         for B in (1, 3):
             g = torch.Generator().manual_seed(B)
@@ -257,6 +255,23 @@ def test_batch_scaling_job_times_the_same_bodies_both_ways(tmp_path):
            "config": {"batches": [1, 2], "n_points": 1500, "repeats": 3, "warmup": 1, "device": "cpu"},
            "models": {}, "ratios": {}, "notes": [], "batch_scaling": s}
     assert "## Per-body time by batch size, interleaved in one process" in to_markdown(res)
+
+
+def test_a_stored_result_still_renders():
+    """A result written by an earlier run (docs/bench_cpu.json, which `volsmpl report` reads too) still gives the
+    plain-text and Markdown reports, with a row for each of its models."""
+    from pathlib import Path
+
+    from volsmpl.bench.summary import format_report, to_markdown
+
+    path = Path(__file__).resolve().parents[2] / "docs" / "bench_cpu.json"
+    if not path.is_file():
+        pytest.skip(f"{path} is not in this checkout")
+    res = json.loads(path.read_text())
+    md, text = to_markdown(res), format_report(res)
+    assert res["models"] and md.startswith("# Benchmark")
+    for name in res["models"]:
+        assert f"| {name} | " in md and f"\n{name} " in text, name
 
 
 def test_decoder_share_column_uses_the_matmul_measured_beside_the_decoder():
