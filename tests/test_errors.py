@@ -151,11 +151,25 @@ def test_subcommand_outputs_checked_before_the_job(tmp_path, capsys, argv, optio
     assert afile.read_text() == "x"
 
 
-def test_selfpen_results_written_atomically():
-    """selfpen's results.json goes through the shared write_atomic (no half-written file after a crash)."""
-    from volsmpl.apps.selfpen import cli as scli
-    src = open(scli.__file__).read()
-    assert 'write_atomic(out / "results.json"' in src and ".write_text(" not in src
+def test_app_results_are_written_atomically(tmp_path, monkeypatch):
+    """The apps write results.json through volsmpl.apps.table.write_results: a write that fails half-way (here the
+    final rename) leaves the earlier file whole and no partial file beside it."""
+    import json
+    import os
+
+    from volsmpl.apps.table import write_results
+
+    write_results(tmp_path, {"a": 1})
+
+    def fail(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", fail)
+    with pytest.raises(OSError, match="disk full"):
+        write_results(tmp_path, {"a": 2, "b": list(range(1000))})
+    monkeypatch.undo()
+    assert json.loads((tmp_path / "results.json").read_text()) == {"a": 1}
+    assert [p.name for p in tmp_path.iterdir()] == ["results.json"]
 
 
 def test_report_uses_the_shared_write_atomic():

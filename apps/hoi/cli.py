@@ -3,12 +3,13 @@
     volsmpl hoi make-db [--n 100] [--seed 0] [--db FOLDER]       # the interaction database (apps/hoi/database.py)
     volsmpl hoi --model volsmpl,coap,mesh --split test --out out/hoi   # fit the test half, results.json + figures
     volsmpl hoi fit --case my_case.json --model volsmpl --out out/hoi_fit   # a user's own case file (apps/hoi/case.py)
+    volsmpl hoi tune --model volsmpl --cases 13 --out docs/hoi    # the image weights on the tuning half (tune.py)
 
-Writes OUT/results.json (config, summary.<model>, the paper's Table 3, per-case records, machine meta),
-OUT/case_<name>.png for the first --render cases and OUT/summary.png; each finished fit is also kept in
-OUT/cases/<case>_<model>.json (volsmpl.io.case_store) with the key of what made it (configuration, the case's content,
-the kind's weights, the source code), so a run stopped at any moment continues with --resume, fitting only the
-cases without a matching record.
+Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<kind>, the paper's Table 3, per-case
+records per kind, figures, meta), OUT/case_<name>.png for the first --render cases and OUT/summary.png; each
+finished fit is also kept in OUT/cases/<case>_<kind>.json with the key of what made it (configuration, the case's
+content, the kind's weights, the source code), so a run stopped at any moment continues with --resume, fitting
+only the cases without a matching record.
 """
 from __future__ import annotations
 
@@ -20,7 +21,9 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
-ACTIONS = ("run", "make-db", "fit")
+from volsmpl.apps.table import add_common, check_common, checkpoint_names, envelope, volumes, write_results
+
+ACTIONS = ("run", "make-db", "fit", "tune")
 
 
 def add_parser(sub):
@@ -32,16 +35,16 @@ def add_parser(sub):
                                    "so the object touches the body where it should without passing through it "
                                    "(supp. D.1); report time per iteration, collisions and contact per model kind.")
     p.add_argument("action", nargs="?", default="run", choices=ACTIONS,
-                   help="run (default): fit database cases; make-db: build the database; fit: one case file")
-    p.add_argument("--model", default="volsmpl,coap,mesh", help="comma-separated model kinds (volsmpl, coap, mesh)")
+                   help="run (default): fit database cases; make-db: build the database; fit: one case file; "
+                        "tune: the image weights on the database's tuning half (tune.py)")
+    add_common(p, out="out/hoi", seed="the interaction database's seed")
     p.add_argument("--cases", default="all", help="'all', a number N (the first N of the split) or comma-separated names")
-    p.add_argument("--split", default="test", choices=["tune", "test", "all"],
-                   help="database half: weights are tuned on 'tune' and reported on 'test'")
+    p.add_argument("--split", default=None, choices=["tune", "test", "all"],
+                   help="database half (default: test; tune always fits the tuning half): weights are tuned on "
+                        "'tune' and reported on 'test'")
     p.add_argument("--case", default=None, help="with 'fit': a case file (format in apps/hoi/case.py)")
     p.add_argument("--db", default=None, help="database folder (default: the user cache, per seed)")
     p.add_argument("--n", type=int, default=100, help="with make-db: number of cases")
-    p.add_argument("--seed", type=int, default=0, help="database seed")
-    p.add_argument("--out", default="out/hoi", help="output folder")
     p.add_argument("--iters", type=int, default=d.iters, help=f"optimisation steps (paper {d.iters})")
     p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (paper {d.lr:g})")
     p.add_argument("--w-keypoints", type=float, default=d.w_keypoints, help="weight of the keypoint term (tuned)")
@@ -51,14 +54,9 @@ def add_parser(sub):
                         "part, the plain one-way Chamfer")
     p.add_argument("--contact-huber", type=float, default=d.contact_huber,
                    help="metres: contact distances beyond this count linearly (pseudo-Huber); 0: squared throughout")
-    p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
-    p.add_argument("--render", type=int, default=3, help="case figures for the first N cases (0: none)")
     p.add_argument("--batch", type=int, default=1,
                    help="cases optimised together (padded; each as if alone); ms/iter is the batch's divided by it")
-    p.add_argument("--resume", action="store_true",
-                   help="reuse the fits in OUT/cases/ made by the same code, configuration, case and weights and fit "
-                        "only the others: a long run stopped early continues where it stopped")
+    p.add_argument("--grid", default="1e4,1e5,1e6,1e7", help="tune: the image weights tried (comma-separated)")
     return p
 
 
@@ -98,17 +96,23 @@ def summarize(results: list) -> dict:
     return out
 
 
-def _volumes(body, models: list, device: str) -> dict:
-    import volsmpl
-
-    return {m: volsmpl.attach_volume(body, model=m).to(device) for m in models}
+def _cases(args, split: str, database) -> list:
+    """The database cases of `split` that --cases selects; one line naming the fix when there is no database."""
+    folder = Path(args.db) if args.db else database.database_folder(args.seed)
+    if not (folder / "index.json").is_file():
+        raise FileNotFoundError(f"no interaction database in {folder}; build it with `volsmpl hoi make-db"
+                                f"{' --db ' + str(folder) if args.db else ''} --seed {args.seed}`")
+    index = json.loads((folder / "index.json").read_text())
+    cases = select_cases(database.load_database(folder), {c["name"]: c for c in index["cases"]}, split, args.cases)
+    if not cases:
+        raise ValueError(f"no cases selected (split {split!r}, cases {args.cases!r})")
+    return cases
 
 
 def run(args) -> int:
     import volsmpl
     from volsmpl.report import paper
-    from volsmpl.volume.models import model_kind, parse_models
-    from volsmpl.io.outputs import check_writable, write_atomic
+    from volsmpl.io.outputs import check_writable
     from volsmpl.io.provenance import machine_info
 
     from volsmpl.io.case_store import CaseStore, job_key
@@ -127,31 +131,27 @@ def run(args) -> int:
         return 0
     if args.batch < 1:
         raise ValueError(f"--batch must be >= 1 (cases optimised together), got {args.batch}")
-    out = check_writable(args.out, "dir", "--out")
-    models = parse_models(args.model)
+    if args.action == "tune":
+        if args.split not in (None, "tune"):
+            raise ValueError(f"tune fits the database's tuning half: drop --split {args.split}")
+        from .tune import run_tune
+        return run_tune(args, _cases(args, "tune", database))
+    split = args.split or "test"
+    models, ckpts = check_common(args)
+    out = Path(args.out)
     cfg = FitConfig(iters=args.iters, lr=args.lr, w_keypoints=args.w_keypoints, w_silhouette=args.w_silhouette,
                     contact_fraction=args.contact_fraction, contact_huber=args.contact_huber, device=args.device)
-    if args.device == "cuda" and not torch.cuda.is_available():
-        raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
-    if args.threads:
-        torch.set_num_threads(args.threads)
     if args.action == "fit":
         if not args.case:
             raise ValueError("'volsmpl hoi fit' needs --case FILE (a case file, format in apps/hoi/case.py)")
         cases = [load_case(args.case)]
     else:
-        folder = Path(args.db) if args.db else database.database_folder(args.seed)
-        if not (folder / "index.json").is_file():
-            raise FileNotFoundError(f"no interaction database in {folder}; build it with `volsmpl hoi make-db"
-                                    f"{' --db ' + str(folder) if args.db else ''} --seed {args.seed}`")
-        index = json.loads((folder / "index.json").read_text())
-        cases = select_cases(database.load_database(folder), {c["name"]: c for c in index["cases"]}, args.split,
-                             args.cases)
-        if not cases:
-            raise ValueError(f"no cases selected (split {args.split!r}, cases {args.cases!r})")
+        cases = _cases(args, split, database)
     body = volsmpl.create_body().to(args.device)
-    volumes = _volumes(body, models, args.device)
-    run_key = {"config": asdict(cfg), "models": models, "split": args.split, "seed": args.seed, "batch": args.batch}
+    vols = volumes(body, models, ckpts, args.device)
+    config = {**asdict(cfg), "models": models, "checkpoints": checkpoint_names(models, ckpts), "split": split,
+              "seed": args.seed, "batch": args.batch, "cases_requested": len(cases),
+              "threads": torch.get_num_threads()}
     store = CaseStore(out / "cases", resume=args.resume)
     per_model = {m: [] for m in models}
     for i0 in range(0, len(cases), args.batch):
@@ -166,14 +166,14 @@ def run(args) -> int:
                                      **({"mesh_sha256": digests[c.name]} if digests[c.name] else {}),
                                      **({"batch": args.batch} if args.batch > 1 else {}),
                                      "threads": torch.get_num_threads()},
-                                    modules=[volumes[m]], packages=["volsmpl.apps.hoi"]) for c in group}
+                                    modules=[vols[m]], packages=["volsmpl.apps.hoi"]) for c in group}
             recs = {c.name: store.get(f"{c.name}_{m}", keys[c.name]) for c in group}
             todo = [c for c in group if recs[c.name] is None]
             if todo:
                 whole = len(todo) == len(group)
                 if whole:
-                    problem = problem or Problem(group, body, volumes[m], cfg)
-                for c, r in zip(todo, fit_cases(todo, body, volumes[m], cfg, problem if whole else None)):
+                    problem = problem or Problem(group, body, vols[m], cfg)
+                for c, r in zip(todo, fit_cases(todo, body, vols[m], cfg, problem if whole else None)):
                     recs[c.name] = asdict(r)
                     store.put(f"{c.name}_{m}", keys[c.name], recs[c.name])
             for c in group:
@@ -183,22 +183,18 @@ def run(args) -> int:
                 print(case_line(c.name, m, r) + ("" if c in todo else "  (reused)"))
         for j, c in enumerate(group):
             if i0 + j < args.render:
-                problem = problem or Problem(group, body, volumes[models[0]], cfg)
+                problem = problem or Problem(group, body, vols[models[0]], cfg)
                 case_panel(out / f"case_{c.name}.png", problem, results[c.name], j)
         # results so far, after every batch: a long run stopped early still leaves its finished cases
         done = i0 + len(group)
         summary = {m: summarize(rs) for m, rs in per_model.items()}
-        result = {
-            **run_key, "cases_requested": len(cases), "paper": paper.rows("hoi"), "summary": summary,
-            "cases": {m: [dict(vars(r)) for r in rs] for m, rs in per_model.items()},
-            "figures": {"summary": "summary.png",
-                        **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: min(done, args.render)]}},
-            "checkpoints": {m: (f"core/assets/{model_kind(m).checkpoint}" if model_kind(m).learned else None)
-                            for m in models},
-            "meta": machine_info(args.device),
-        }
+        figures = {"summary": "summary.png",
+                   **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: min(done, args.render)]}}
+        result = envelope("hoi", config, summary, paper.rows("hoi"),
+                          {m: [dict(vars(r)) for r in rs] for m, rs in per_model.items()}, machine_info(args.device),
+                          figures)
         summary_plot(out / "summary.png", summary)
-        write_atomic(out / "results.json", json.dumps(result, indent=1))
+        write_results(out, result)
     if store.reused:
         print(f"--resume: {store.reused} fit(s) reused from {out / 'cases'}; {store.stale} stale record(s) refitted")
     print(format_table(summary))

@@ -1,6 +1,6 @@
 """Tuning of the human–object weights that the paper does not give (the image terms), on the database's tuning half.
 
-    python -m volsmpl.apps.hoi.tune --cases 13 --grid 1e4,1e5,1e6,1e7 --model volsmpl --threads 1 --out docs/hoi/tune.json
+    volsmpl hoi tune --cases 13 --grid 1e4,1e5,1e6,1e7 --model volsmpl --threads 1 --out docs/hoi     # docs/hoi/tune.json
 
 Every grid value sets both image weights (keypoints and silhouette); each model kind fits the first --cases of the
 'tune' split (13: one case of each kind) at the paper's settings otherwise. The score of a value is the mean over
@@ -10,11 +10,7 @@ default and is reported on the 'test' split only. Per-case records of every valu
 """
 from __future__ import annotations
 
-import argparse
-import json
-import sys
 from dataclasses import asdict, replace
-from pathlib import Path
 
 import numpy as np
 
@@ -26,46 +22,33 @@ def score(results: list) -> float:
     return float(np.nanmean(vals)) if vals else float("nan")
 
 
-def main(argv=None) -> int:
-    import torch
-
+def run_tune(args, cases: list) -> int:
+    """`volsmpl hoi tune`: each --grid value as both image weights, every kind of --model fitting `cases` (the
+    tuning half's selection) at the other settings given; writes OUT/tune.json after every value."""
     import volsmpl
-    from volsmpl.volume.models import parse_models
-    from volsmpl.io.outputs import check_writable, write_atomic
+    from volsmpl.apps.table import check_common, checkpoint_names, volumes, write_results
 
-    from volsmpl.apps.hoi import database
-    from .cli import case_line, select_cases
+    from .cli import case_line
     from .fit import FitConfig, Problem, fit_case
 
-    p = argparse.ArgumentParser(prog="python -m volsmpl.apps.hoi.tune", description=__doc__.splitlines()[0])
-    p.add_argument("--cases", type=int, default=13)
-    p.add_argument("--grid", default="1e4,1e5,1e6,1e7")
-    p.add_argument("--model", default="volsmpl")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--db", default=None)
-    p.add_argument("--iters", type=int, default=FitConfig().iters)
-    p.add_argument("--threads", type=int, default=None)
-    p.add_argument("--out", default="docs/hoi/tune.json")
-    args = p.parse_args(argv)
-    check_writable(args.out, "file", "--out")
-    if args.threads:
-        torch.set_num_threads(args.threads)
-    grid = [float(x) for x in args.grid.split(",")]
-    folder = Path(args.db) if args.db else database.database_folder(args.seed)
-    if not (folder / "index.json").is_file():
-        raise SystemExit(f"no interaction database in {folder}; build it with `volsmpl hoi make-db --seed {args.seed}`")
-    index = {c["name"]: c for c in json.loads((folder / "index.json").read_text())["cases"]}
-    cases = select_cases(database.load_database(folder), index, "tune", str(args.cases))
-    body = volsmpl.create_body()
-    models = parse_models(args.model)
-    volumes = {m: volsmpl.attach_volume(body, model=m) for m in models}
+    try:
+        grid = [float(x) for x in args.grid.split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(f"--grid {args.grid!r}: give comma-separated numbers, e.g. 1e4,1e5,1e6") from None
+    if not grid:
+        raise ValueError(f"--grid {args.grid!r} names no weight: give comma-separated numbers")
+    models, ckpts = check_common(args)
+    body = volsmpl.create_body().to(args.device)
+    vols = volumes(body, models, ckpts, args.device)
+    base = FitConfig(iters=args.iters, lr=args.lr, contact_fraction=args.contact_fraction,
+                     contact_huber=args.contact_huber, device=args.device)
     rows = []
     for w in grid:
-        cfg = replace(FitConfig(iters=args.iters), w_keypoints=w, w_silhouette=w)
+        cfg = replace(base, w_keypoints=w, w_silhouette=w)
         res = {m: [] for m in models}
         for m in models:
             for c in cases:
-                r = fit_case(c, body, volumes[m], cfg, Problem(c, body, volumes[m], cfg))
+                r = fit_case(c, body, vols[m], cfg, Problem(c, body, vols[m], cfg))
                 res[m].append(r)
                 print(f"w_image {w:g} {case_line(c.name, m, r)}", flush=True)
         row = {"w_image": w, "score": float(np.mean([score(rs) for rs in res.values()])),
@@ -78,13 +61,10 @@ def main(argv=None) -> int:
         rows.append(row)
         print(f"w_image {w:g}: score {row['score']:.3f}", flush=True)
         best = min(rows, key=lambda r: r["score"])  # written after every value: a stopped run keeps what it did
-        write_atomic(args.out, json.dumps({"cases": [c.name for c in cases], "models": models,
-                                           "config": {k: v for k, v in asdict(cfg).items() if k not in
-                                                      ("w_keypoints", "w_silhouette")},
-                                           "rows": rows, "best": best}, indent=1))
-    print(f"best w_image {best['w_image']:g} (score {best['score']:.3f}); wrote {args.out}")
+        path = write_results(args.out, {"cases": [c.name for c in cases], "models": models,
+                                        "checkpoints": checkpoint_names(models, ckpts),
+                                        "config": {k: v for k, v in asdict(cfg).items() if k not in
+                                                   ("w_keypoints", "w_silhouette")},
+                                        "rows": rows, "best": best}, "tune.json")
+    print(f"best w_image {best['w_image']:g} (score {best['score']:.3f}); wrote {path}")
     return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

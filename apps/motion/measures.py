@@ -10,15 +10,10 @@ the walking model and to these measures).
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import torch
 
 from volsmpl.body.gait import FOOT_JOINTS
-
-if TYPE_CHECKING:
-    from .walk import Walk
 
 __all__ = ["JERK_WEIGHT", "check_tensor", "pose_prior", "jerk", "foot_skate", "render_strip"]
 
@@ -104,7 +99,7 @@ def foot_skate(joints: torch.Tensor, contacts: torch.Tensor, foot_joints: tuple[
 
 
 # ------------------------------------------------------------------------------------------------ pictures
-def render_strip(walk: Walk, faces, path=None, every: int = 10, sequence: int = 0, size: int = 360,
+def render_strip(walk, faces, path=None, every: int = 10, sequence: int = 0, size: int = 360,
                  yaw: float = 90.0, pitch: float = 10.0, extent: float = 2.2):
     """Side view of every `every`-th frame of one sequence, side by side (one tile per frame, the camera following
     the pelvis, one scale), with a floor grid of dots every 10 cm (fixed in the world, so a sliding foot shows as a

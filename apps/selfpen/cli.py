@@ -1,44 +1,45 @@
 """`volsmpl selfpen`: repair self-intersecting bodies with VolumetricSMPL, COAP and/or the exact mesh (Table 6).
 
-    volsmpl selfpen --model volsmpl,coap,mesh
-    volsmpl selfpen --model volsmpl,coap --checkpoint-volsmpl runs/v.safetensors --checkpoint-coap runs/c.safetensors
-    volsmpl selfpen --model volsmpl --cases deep_squat,arm_through_head --random-init --max-iters 20
+    volsmpl selfpen --model volsmpl,coap,mesh --out out/selfpen                 # the 17 shipped cases
+    volsmpl selfpen --model volsmpl,coap --checkpoint-coap runs/c/model --resume
+    volsmpl selfpen --case-file my_bodies.json --model volsmpl --out out/mine    # your own bodies (cases.py)
+    volsmpl selfpen tune --model volsmpl,coap --out docs/selfpen                 # the tuning sweep (tune.py)
 
-Writes OUT/results.json (config, per-case results, per-model summary, the paper's numbers) and
-OUT/render_<case>.png (before / after per model, intersecting triangles in red) for the first
---render cases; prints the summary beside the paper's table.
+Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<kind>, the paper's Table 6, per-case
+records per kind, figures, meta) and OUT/render_<case>.png (before / after per kind, intersecting triangles in red)
+for the first --render cases; prints the summary beside the paper's table. Each finished repair is kept in
+OUT/cases/ with the key of what made it, so a stopped run continues with --resume.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from volsmpl.volume.models import model_kind, parse_models
-from volsmpl.io.provenance import machine_info
+from volsmpl.apps.table import (add_common, check_common, checkpoint_names, CaseRecords, envelope, volumes,
+                                write_results)
 
 from .cases import CASES_FILE, load_cases
-from .optimize import PAPER, PRESETS, SelfPenConfig, format_table, repair_case, summarize
+from .optimize import PAPER, PRESETS, RepairResult, SelfPenConfig, format_table, repair_case, summarize
 
 HIGHLIGHT, GREY = (0.9, 0.1, 0.1), (0.75, 0.75, 0.75)
+ACTIONS = ("run", "tune")
 
 
 def add_parser(sub):
+    from .tune import GRID_LR, GRID_W_PRIOR, GRID_W_SELFPEN
+
     d = SelfPenConfig()
     p = sub.add_parser("selfpen", help="resolve self-intersections by pose optimisation (Sec. 4.2.4, Table 6)",
                        description="Optimise the pose of self-intersecting bodies against the volumetric "
                                    "self-penetration loss; report time, memory, iterations, triangle collisions.")
-    p.add_argument("--model", default="volsmpl,coap,mesh",
-                   help="comma-separated model kinds: volsmpl, coap, mesh (the exact reference); default all three")
+    p.add_argument("action", nargs="?", default="run", choices=ACTIONS,
+                   help="run (default): repair the cases; tune: sweep the step size and weights on them (tune.py)")
+    add_common(p, out="out/selfpen", seed=None)
     p.add_argument("--cases", default="all", help="comma-separated case names from the case file, or 'all'")
     p.add_argument("--case-file", default=str(CASES_FILE), help="JSON case file (default: the shipped 17 cases)")
-    p.add_argument("--out", default="out/selfpen", help="output folder (results.json, render_*.png)")
-    p.add_argument("--checkpoint", default=None, help="trained checkpoint (only with a single --model)")
-    p.add_argument("--checkpoint-volsmpl", default=None, help="trained VolumetricSMPL checkpoint")
-    p.add_argument("--checkpoint-coap", default=None, help="trained COAP checkpoint")
     p.add_argument("--random-init", action="store_true", help="random network weights (pipeline check only)")
     p.add_argument("--preset", default="tuned", choices=sorted(PRESETS),
                    help="hyper-parameter set: 'tuned' (our tuning run, docs/selfpen/tune.json) or 'paper' "
@@ -60,39 +61,14 @@ def add_parser(sub):
                    help=f"radians: longest rotation step of one joint per iteration (tuned {d.max_step:g}, paper 0: plain SGD)")
     p.add_argument("--code-grad", default=None, choices=["on", "off"],
                    help="back-propagate through the part codes (tuned off: rigid part motion only; paper on)")
-    p.add_argument("--seed", type=int, default=d.seed, help="seed of the point sampler")
-    p.add_argument("--device", default=d.device, choices=["cpu", "cuda"])
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
-    p.add_argument("--render", type=int, default=3, help="render before/after images of the first N cases (0: none)")
+    p.add_argument("--sampler-seed", type=int, default=d.seed, help="seed of the penetration point sampler")
+    p.add_argument("--grid-lr", type=float, nargs="+", default=list(GRID_LR), help="tune: learning rates tried")
+    p.add_argument("--grid-w-selfpen", type=float, nargs="+", default=list(GRID_W_SELFPEN),
+                   help="tune: self-penetration weights tried")
+    p.add_argument("--grid-w-prior", type=float, nargs="+", default=list(GRID_W_PRIOR), help="tune: prior weights tried")
+    p.add_argument("--combine", nargs="+", default=None, metavar="JSON",
+                   help="tune: only merge earlier tuning runs (e.g. one kind each) into OUT/tune.json and pick the best")
     return p
-
-
-def _checkpoints(args, models: list[str]) -> dict:
-    """model -> checkpoint path or None (shipped); each given checkpoint is checked to exist and to hold its model,
-    and one given for a model that does not run is refused (it would be ignored)."""
-    from volsmpl.volume.models import expect_checkpoint_model
-
-    ck = {m: None for m in models}
-    for m, c in (("volsmpl", args.checkpoint_volsmpl), ("coap", args.checkpoint_coap)):
-        if c and m not in ck:
-            raise ValueError(f"--checkpoint-{m} is given but --model {','.join(models)} does not run {m}: add it to "
-                             f"--model or drop the option.")
-        if c:
-            ck[m] = c
-    if args.checkpoint is not None:
-        if len(models) != 1:
-            raise ValueError("--checkpoint needs exactly one --model; use --checkpoint-volsmpl / --checkpoint-coap for several")
-        ck[models[0]] = args.checkpoint
-    for m, c in ck.items():
-        if c is not None and not model_kind(m).learned:
-            raise ValueError(f"model '{m}' has no weights: drop its checkpoint")
-    if args.random_init and any(ck.values()):
-        raise ValueError("--random-init and a checkpoint exclude each other")
-    for m, c in ck.items():
-        if c is not None:
-            option = "--checkpoint" if c == args.checkpoint else f"--checkpoint-{m}"
-            expect_checkpoint_model(c, m, option, "give it to {held} (--model {held}, --checkpoint-{held}).")
-    return ck
 
 
 def _case_names(text: str) -> list[str] | None:
@@ -129,69 +105,87 @@ def render_case(path, faces: np.ndarray, results: dict, size: int = 320) -> None
     save_png(path, grid(images, labels, cols=len(panels)))
 
 
-def run(args) -> int:
-    import volsmpl
-    from volsmpl.io.outputs import check_writable, write_atomic
-
-    check_writable(args.out, "dir", "--out")  # before any work: a bad folder fails in seconds
-    models = parse_models(args.model)
-    ckpts = _checkpoints(args, models)
-    given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks", "tau", "patience", "stall_rtol", "max_step") if getattr(args, k) is not None}
+def _config(args) -> SelfPenConfig:
+    given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks", "tau", "patience",
+                                           "stall_rtol", "max_step") if getattr(args, k) is not None}
     if args.code_grad is not None:
         given["code_grad"] = args.code_grad == "on"
-    cfg = SelfPenConfig.preset(args.preset, max_iters=args.max_iters, n_points=args.n_points, seed=args.seed,
-                               device=args.device, **given)
-    if cfg.device == "cuda" and not torch.cuda.is_available():
-        raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
-    if args.threads is not None:
-        if args.threads < 1:
-            raise ValueError(f"--threads {args.threads}: give a positive number of CPU threads.")
-        torch.set_num_threads(args.threads)
+    return SelfPenConfig.preset(args.preset, max_iters=args.max_iters, n_points=args.n_points, seed=args.sampler_seed,
+                                device=args.device, **given)
+
+
+def run(args) -> int:
+    import volsmpl
+
+    if args.action == "tune" and args.combine:
+        from .tune import run_combine
+        return run_combine(args)
+    models, ckpts = check_common(args)
+    if args.random_init and any(ckpts.values()):
+        raise ValueError("--random-init and a checkpoint exclude each other: drop one")
+    if args.action == "tune":
+        if args.random_init:
+            raise ValueError("tune chooses settings for trained volumes: drop --random-init")
+        if "mesh" in models:
+            raise ValueError("tune sweeps the learned kinds' settings: give --model volsmpl,coap (not mesh)")
+    cfg = _config(args)
     cases = load_cases(args.case_file, _case_names(args.cases))
     body = volsmpl.create_body().to(cfg.device)
-    volumes = {}
-    for m in models:  # fail early (missing checkpoint) before any work
-        if args.random_init and model_kind(m).learned:
-            volumes[m] = volsmpl.attach_volume(body, model=m, pretrained=False)
-        else:
-            volumes[m] = volsmpl.attach_volume(body, checkpoint=ckpts[m], model=m)
-        volumes[m].to(cfg.device)
+    vols = volumes(body, models, ckpts, cfg.device, random_init=args.random_init)   # a missing checkpoint fails here
+    if args.action == "tune":
+        from .tune import run_tune
+        return run_tune(args, body, vols, cases, checkpoint_names(models, ckpts))
     if args.random_init:
         print("note: --random-init: untrained networks, the numbers only check the pipeline")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    store = CaseRecords(args.out, "selfpen", resume=args.resume)
     per_model = {m: [] for m in models}
-    rendered = 0
+    figures = {}
     for case in cases:
-        results = {}
+        results, computed = {}, True
         for m in models:
-            r = repair_case(body, volumes[m], case, cfg, keep_meshes=rendered < args.render)
+            draw = len(figures) < args.render
+            spec = {"config": asdict(cfg), "model": m, "random_init": bool(args.random_init),
+                    "case": {"name": case.name, "betas": case.betas, "global_orient": case.global_orient,
+                             "body_pose": case.body_pose}}
+            kept = {}
+
+            def make():
+                r = repair_case(body, vols[m], case, cfg, keep_meshes=draw)
+                kept["result"] = r
+                return r.to_json()
+
+            rec, reused = store.get_or_make(f"{case.name}_{m}", spec, vols[m], make)
+            r = kept.get("result") or RepairResult(**rec)
+            computed = computed and not reused
             per_model[m].append(r)
             results[m] = r
+            tail = "  (reused)" if reused else ""
             if r.status == "no_intersection":
-                print(f"{case.name:28s} {m:8s} no self-intersection: left unchanged")
+                print(f"{case.name:28s} {m:8s} no self-intersection: left unchanged{tail}")
             else:
                 print(f"{case.name:28s} {m:8s} {r.status:16s} it {r.iterations:3d}  collisions {r.collisions_before:5d} -> "
                       f"{r.collisions_after:5d} (collidable parts {r.collidable_before} -> {r.collidable_after})  "
-                      f"pose change {r.pose_change_deg:6.2f} deg  {r.total_s:6.2f} s")
-        if rendered < args.render and all(r.vertices_before is not None for r in results.values()):
-            render_case(out / f"render_{case.name}.png", body.faces, results)
-            rendered += 1
+                      f"pose change {r.pose_change_deg:6.2f} deg  {r.total_s:6.2f} s{tail}")
+        if len(figures) < args.render and all(r.vertices_before is not None for r in results.values()):
+            render_case(Path(args.out) / f"render_{case.name}.png", body.faces, results)
+            figures[case.name] = f"render_{case.name}.png"
     summaries = {m: summarize(rs) for m, rs in per_model.items()}
     print()
     print(format_table(summaries))
     print("collisions: pose-induced intersecting triangle pairs (rest-pose pairs of the same shape left out), "
           "mean over cases; collidable parts: those of them between two parts the self-penetration loss may push "
           "apart (not the same part, not neighbours or ignored pairs); memory: " + ", ".join(sorted({s['memory_kind'] for s in summaries.values() if s['memory_kind']})))
-    result = {
-        "config": asdict(cfg), "preset": args.preset, "models": models, "random_init": bool(args.random_init),
-        "checkpoints": {m: (str(ckpts[m] or "shipped") if model_kind(m).learned and not args.random_init else None)
-                        for m in models},
-        "case_file": str(args.case_file), "paper": PAPER, "summary": summaries,
-        "cases": {m: [r.to_json() for r in rs] for m, rs in per_model.items()},
-        "device": torch.cuda.get_device_name(0) if cfg.device == "cuda" else "cpu",
-        "threads": torch.get_num_threads(), "meta": machine_info(cfg.device),
-    }
-    write_atomic(out / "results.json", json.dumps(result, indent=1))
-    print(f"wrote {out / 'results.json'}" + (f" and {rendered} render(s)" if rendered else ""))
+    config = {**asdict(cfg), "preset": args.preset, "models": models, "random_init": bool(args.random_init),
+              "checkpoints": checkpoint_names(models, ckpts, args.random_init), "case_file": str(args.case_file),
+              "device_name": torch.cuda.get_device_name(0) if cfg.device == "cuda" else "cpu",
+              "threads": torch.get_num_threads()}
+    from volsmpl.io.provenance import machine_info
+
+    result = envelope("selfpen", config, summaries, PAPER, {m: [r.to_json() for r in rs] for m, rs in per_model.items()},
+                      machine_info(cfg.device), figures)
+    path = write_results(args.out, result)
+    note = store.note()
+    if note:
+        print(note)
+    print(f"wrote {path}" + (f" and {len(figures)} figure(s)" if figures else ""))
     return 0

@@ -1,5 +1,5 @@
-"""One tuning run of the repair's hyper-parameters, the same grid for every model (issue: "tune them
-once for both models alike and document the values").
+"""One tuning run of the repair's hyper-parameters, the same grid for every model, so that both learned kinds
+are tuned alike (`volsmpl selfpen tune`).
 
 The paper's values (lr 1e-5, pose-prior weight 1e3, self-penetration weight 0.1) were set for
 COAP's SMPL-X code; with plain SGD only the products lr * w_selfpen and lr * w_prior matter, and
@@ -13,12 +13,11 @@ collisions removed, the mean iterations and the mean pose change. Selection rule
 point with the largest fraction removed averaged over the models, ties broken by the smaller pose
 change.
 
-    python -m volsmpl.apps.selfpen.tune --models volsmpl,coap --checkpoint-coap runs/coap/.../model \
-        --cases forearm_through_torso_left,deep_squat --out out/selfpen_tune.json
+    volsmpl selfpen tune --model volsmpl,coap --checkpoint-coap runs/coap/.../model \
+        --cases forearm_through_torso_left,deep_squat --out out/selfpen_tune          # -> out/selfpen_tune/tune.json
 """
 from __future__ import annotations
 
-import argparse
 import itertools
 import json
 import time
@@ -26,9 +25,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
-import torch
 
-from .cases import load_cases
 from .optimize import SelfPenConfig, repair_case, summarize
 
 # default grid: learning rate and the two weights (w_selfpen, w_prior); module docstring
@@ -109,49 +106,33 @@ def combine(results: list) -> dict:
     return {**first, "rows": sorted(rows.values(), key=_point), "best": _best_point(complete), "checkpoints": ck}
 
 
-def main(argv=None) -> int:
-    import volsmpl
+def run_tune(args, body, volumes: dict, cases, checkpoints: dict) -> int:
+    """`volsmpl selfpen tune`: the sweep over --grid-lr x --grid-w-selfpen x --grid-w-prior (the other settings: the
+    tuned preset's, with --max-iters, --stop-checks, --tau, --patience) on the cases; writes OUT/tune.json."""
+    from volsmpl.apps.table import write_results
 
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--models", default="volsmpl,coap")
-    p.add_argument("--checkpoint-volsmpl", default=None)
-    p.add_argument("--checkpoint-coap", default=None)
-    p.add_argument("--cases", default="all")
-    p.add_argument("--lr", type=float, nargs="+", default=list(GRID_LR))
-    p.add_argument("--w-selfpen", type=float, nargs="+", default=list(GRID_W_SELFPEN))
-    p.add_argument("--w-prior", type=float, nargs="+", default=list(GRID_W_PRIOR))
-    p.add_argument("--max-iters", type=int, default=SelfPenConfig.max_iters)
-    p.add_argument("--stop-checks", type=int, default=SelfPenConfig.stop_checks)
-    p.add_argument("--tau", type=float, default=SelfPenConfig.tau)
-    p.add_argument("--patience", type=int, default=SelfPenConfig.patience)
-    p.add_argument("--threads", type=int, default=None)
-    p.add_argument("--out", default="out/selfpen_tune.json")
-    p.add_argument("--combine", nargs="+", default=None, metavar="JSON",
-                   help="only merge earlier tuning runs (one model each) into --out and pick the best grid point")
-    a = p.parse_args(argv)
-    if a.combine:
-        result = combine([json.loads(Path(f).read_text()) for f in a.combine])
-        Path(a.out).write_text(json.dumps(result, indent=1))
-        print("best:", result["best"], "->", a.out)
-        return 0
-    if a.threads:
-        torch.set_num_threads(a.threads)
-    from .cli import parse_models
-
-    models = parse_models(a.models)
-    ck = {"volsmpl": a.checkpoint_volsmpl, "coap": a.checkpoint_coap}
-    body = volsmpl.create_body()
-    volumes = {m: volsmpl.attach_volume(body, checkpoint=ck[m], model=m) for m in models}
-    names = None if a.cases == "all" else [n.strip() for n in a.cases.split(",") if n.strip()]
-    cases = load_cases(names=names)
-    base = SelfPenConfig(max_iters=a.max_iters, stop_checks=a.stop_checks, tau=a.tau, patience=a.patience)  # rest: tuned
-    result = tune(body, volumes, cases, grid_configs(base, a.lr, a.w_selfpen, a.w_prior))
-    result["checkpoints"] = {m: str(ck[m] or "shipped") for m in models}
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(result, indent=1))
-    print("best:", result["best"], "->", a.out)
+    given = {k: getattr(args, k) for k in ("stop_checks", "tau", "patience") if getattr(args, k) is not None}
+    base = SelfPenConfig(max_iters=args.max_iters, **given)   # the rest: the tuned preset's
+    result = tune(body, volumes, cases, grid_configs(base, args.grid_lr, args.grid_w_selfpen, args.grid_w_prior))
+    result["checkpoints"] = {m: c for m, c in checkpoints.items() if c is not None}
+    path = write_results(args.out, result, "tune.json")
+    print("best:", result["best"], "->", path)
     return 0
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
+def run_combine(args) -> int:
+    """`volsmpl selfpen tune --combine A.json B.json`: earlier tuning runs merged into OUT/tune.json."""
+    from volsmpl.apps.table import write_results
+    from volsmpl.io.outputs import check_writable
+
+    check_writable(args.out, "dir", "--out")
+    runs = []
+    for f in args.combine:
+        try:
+            runs.append(json.loads(Path(f).read_text(encoding="utf-8")))
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+            raise ValueError(f"--combine {f}: not a readable tuning result ({e.__class__.__name__}: {e})") from None
+    result = combine(runs)
+    path = write_results(args.out, result, "tune.json")
+    print("best:", result["best"], "->", path)
+    return 0

@@ -64,14 +64,16 @@ _BODY_DATA = ("core/assets/anny_body.json", "core/assets/anny_shapes.npz", "core
               "core/assets/anny_smplx_neutral.npz")
 
 
-def _app(name: str, tables: tuple, title: str, build: Callable = rs.summary_section,
-         more: dict | None = None) -> Section:
-    """An app's section: its results.json (docs/, else out/) tabulated by `build`; `more`: further results of the
-    section, name -> (path, command)."""
-    more = more or {}
+def _app(name: str, tables: tuple, title: str, build: Callable = rs.summary_section, command: str | None = None,
+         more: dict | None = None, figures: tuple = (), tune: bool = False) -> Section:
+    """An app's section: its docs/<name>/results.json (else out/<name>/results.json), tabulated by `build`; with
+    `tune` its tuning sweep docs/<name>/tune.json (`volsmpl <name> tune`); `more`: further results, name -> (path,
+    command)."""
+    more = {**({f"{name}_tune": (f"docs/{name}/tune.json", f"volsmpl {name} tune --out docs/{name}")} if tune else {}),
+            **(more or {})}
     results = {name: (f"docs/{name}/results.json", f"out/{name}/results.json"), **{k: p for k, (p, _) in more.items()}}
-    commands = {name: f"volsmpl {name} --out out/{name}", **{k: c for k, (_, c) in more.items()}}
-    return Section(title, tables, (f"apps/{name}",), results, commands, build, (), _CKPTS)
+    commands = {name: command or f"volsmpl {name} --out out/{name}", **{k: c for k, (_, c) in more.items()}}
+    return Section(title, tables, (f"apps/{name}",), results, commands, build, figures, _CKPTS)
 
 
 SECTIONS: dict[str, Section] = {
@@ -90,22 +92,17 @@ SECTIONS: dict[str, Section] = {
          "bench_cuda": "volsmpl bench --device cuda --models volsmpl,volsmpl-dense,coap --batch 1 8 --repeats 10 "
                        "--budget 5 --quick --no-bodybody --out docs/bench_cuda.json --markdown docs/bench_cuda.md"},
         rs.bench_section, (), _CKPTS),
-    "selfpen": Section(
-        "Self-intersection repair", ("6",), ("apps/selfpen",),
-        {"selfpen": ("docs/selfpen/results.json", "out/selfpen/results.json"),
-         "selfpen_seeds": "docs/selfpen/seeds.json",
-         "selfpen_tune": "docs/selfpen/tune.json"},
-        {"selfpen": "volsmpl selfpen --model volsmpl,coap,mesh --out out/selfpen && "
-                    "cp out/selfpen/results.json docs/selfpen/results.json",
-         "selfpen_seeds": "for S in 0 1 2 3; do volsmpl selfpen --model volsmpl,coap --seed $S --out out/selfpen_s$S; "
-                          "done  # means over the seeds: docs/selfpen/seeds.json",
-         "selfpen_tune": "python -m volsmpl.apps.selfpen.tune --out docs/selfpen/tune.json"},
-        rs.selfpen_section, ("docs/selfpen/hands_through_thighs.png", "docs/selfpen/arm_through_head.png"), _CKPTS),
+    "selfpen": _app("selfpen", ("6",), "Self-intersection repair", rs.selfpen_section,
+                    "volsmpl selfpen --model volsmpl,coap,mesh --out out/selfpen",
+                    {"selfpen_seeds": ("docs/selfpen/seeds.json",
+                                       "for S in 0 1 2 3; do volsmpl selfpen --model volsmpl,coap --sampler-seed $S "
+                                       "--out out/selfpen_s$S; done; python tools/selfpen_seeds.py")},
+                    ("docs/selfpen/hands_through_thighs.png", "docs/selfpen/arm_through_head.png"), tune=True),
     "hoi": _app("hoi", ("3",), "Human-object reconstruction"),
     "egohmr": _app("egohmr", ("4",), "Human mesh recovery in 3D scenes (EgoHMR)"),
     "motion": _app("motion", ("5", "D.1"), "Scene-constrained motion synthesis", rs.motion_section,
-                   {"motion_paired": ("docs/motion/paired.json", "python -m volsmpl.apps.motion.stats "
-                                      "docs/motion/results.json --out docs/motion/paired.json")}),
+                   more={"motion_paired": ("docs/motion/paired.json", "python -m volsmpl.apps.motion.stats "
+                                           "docs/motion/results.json --out docs/motion/paired.json")}),
 }
 
 
@@ -173,7 +170,8 @@ def _first(d: dict, *keys):
 
 def provenance(data: dict) -> dict:
     """checkpoint, device, commit, date of a result JSON ('not recorded' where absent)."""
-    ck = _first(data, "meta.checkpoint", "checkpoint", "extra.checkpoint", "checkpoints", "meta.checkpoints")
+    ck = _first(data, "meta.checkpoint", "checkpoint", "extra.checkpoint", "checkpoints", "config.checkpoints",
+                "meta.checkpoints")
     if ck is None and isinstance(data.get("models"), dict):  # volsmpl bench: models.<name>.checkpoint
         ck = {m: r["checkpoint"] for m, r in data["models"].items() if isinstance(r, dict) and r.get("checkpoint")}
     if isinstance(ck, dict):

@@ -169,7 +169,7 @@ def test_cli_without_checkpoint_stops_with_attach_volume_message(tmp_path, capsy
      ["--checkpoint-coap is given", "does not run coap"]),
     (["--model", "volsmpl", "--checkpoint-volsmpl", "{coap}", "--cases", "deep_squat"],
      ["--checkpoint-volsmpl {coap} holds a coap model", "--checkpoint-coap"]),
-    (["--model", "volsmpl", "--checkpoint", "{coap}", "--cases", "deep_squat"], ["--model coap"]),
+    (["--model", "mesh", "--checkpoint-volsmpl", "{coap}", "--cases", "deep_squat"], ["--checkpoint-volsmpl is given", "does not run volsmpl"]),
     (["--model", "mesh", "--threads", "0", "--cases", "deep_squat"], ["--threads 0"]),
 ])
 def test_cli_case_and_checkpoint_mistakes_stop_before_any_work(tmp_path, capsys, monkeypatch, argv, words):
@@ -311,11 +311,35 @@ def test_cli_end_to_end_random_init(tmp_path):
                    "--max-iters", "1", "--n-points", "32", "--threads", "1", "--out", str(tmp_path), "--render", "1"])
     assert rc == 0
     res = json.loads((tmp_path / "results.json").read_text())
-    assert set(res["summary"]) == {"volsmpl", "coap"} and res["random_init"]
+    assert res["app"] == "selfpen" and set(res["summary"]) == {"volsmpl", "coap"} and res["config"]["random_init"]
+    assert res["config"]["checkpoints"] == {"volsmpl": "random init", "coap": "random init"}
     for m in ("volsmpl", "coap"):
         (c,) = res["cases"][m]
         assert c["name"] == "arm_through_head" and c["collisions_before"] > 0 and len(c["body_pose"]) == 69
+    assert res["figures"] == {"arm_through_head": "render_arm_through_head.png"}
     assert (tmp_path / "render_arm_through_head.png").stat().st_size > 1000
+
+
+def test_cli_resume_reuses_finished_repairs_and_refits_changed_settings(tmp_path, capsys, monkeypatch):
+    """--resume takes each finished (case, kind) repair from OUT/cases/ when the same settings made it (the results
+    equal a fresh run's), and repairs again what another setting would change."""
+    import volsmpl.apps.selfpen.cli as scli
+
+    argv = ["selfpen", "--model", "mesh", "--cases", "arm_through_head,deep_squat", "--max-iters", "2", "--n-points",
+            "32", "--threads", "1", "--render", "0", "--out", str(tmp_path)]
+    assert cli_main(argv) == 0
+    first = json.loads((tmp_path / "results.json").read_text())
+    calls = []
+    real = scli.repair_case
+    monkeypatch.setattr(scli, "repair_case", lambda *a, **k: calls.append(a[2].name) or real(*a, **k))
+    capsys.readouterr()
+    assert cli_main(argv + ["--resume"]) == 0
+    assert calls == [] and capsys.readouterr().out.count("(reused)") == 2
+    again = json.loads((tmp_path / "results.json").read_text())
+    assert again["cases"] == first["cases"] and again["summary"] == first["summary"]
+    assert cli_main(argv[:-6] + ["--max-iters", "3", "--threads", "1", "--render", "0", "--out", str(tmp_path),
+                                 "--resume"]) == 0
+    assert sorted(calls) == ["arm_through_head", "deep_squat"]
 
 
 @pytest.mark.needs_checkpoint

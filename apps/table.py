@@ -1,0 +1,214 @@
+"""What the four apps share: their common options (one spelling, one meaning), the checks of those options before
+any work, one volume per model kind, the resumable case records, and the results.json envelope.
+
+Every app's parser calls `add_common`; its `run` calls `check_common` first (models, checkpoints, threads, render,
+out; the device is checked once, by `volsmpl.cli`), then `volumes`, loops over its cases with `CaseRecords`, and
+writes `envelope(...)` with `write_results`:
+
+    models, ckpts = check_common(args)                          # ValueError (one line) on a bad option
+    vols = volumes(body, models, ckpts, args.device)             # {"volsmpl": Volume, "coap": Volume, "mesh": ...}
+    store = CaseRecords(args.out, "selfpen", resume=args.resume)
+    rec, reused = store.get_or_make(f"{case}_{m}", {"config": cfg, "case": case, "model": m}, vols[m],
+                                    lambda: repair(case).to_json())
+    write_results(args.out, envelope("selfpen", config, summary, paper, cases, meta))
+
+The options:
+  --model KINDS              comma-separated kinds (volsmpl, coap, mesh; and none where an app runs without a volume)
+  --checkpoint-volsmpl PATH  trained VolumetricSMPL checkpoint (default: the shipped one); likewise --checkpoint-coap
+  --threads N                torch CPU threads (N >= 1; default: torch's)
+  --seed S                   the seed of the app's case data (rooms, database, frames)
+  --out DIR                  output folder (results.json, figures, cases/)
+  --resume                   reuse the finished case records in OUT/cases/ made by the same code, settings, case and
+                             weights; compute only the others
+  --render N                 figures of the first N cases (0: none)
+  --device cpu|cuda          where the work runs
+
+The envelope: {app, config, summary, paper, cases: {kind: [records]}, figures, meta} and, after them, what an app
+adds of its own (motion's tuning and paired differences, egohmr's regressor row and batch sizes).
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Callable
+
+__all__ = ["add_common", "check_common", "check_threads", "parse_kinds", "checkpoints", "volumes",
+           "checkpoint_names", "CaseRecords", "envelope", "write_results"]
+
+
+
+def add_common(p, *, out: str, model: str = "volsmpl,coap,mesh", none: bool = False, render: int = 3,
+               seed: str = "the seed of the case data", resume: str | None = None) -> None:
+    """Add the shared options to an app's parser (module docstring); `none`: the app accepts the kind 'none'."""
+    from volsmpl.volume.models import MODELS
+
+    kinds = ("none, " if none else "") + ", ".join(MODELS)
+    p.add_argument("--model", default=model, help=f"comma-separated model kinds ({kinds}); default {model}")
+    p.add_argument("--checkpoint-volsmpl", default=None, help="trained VolumetricSMPL checkpoint (default: shipped)")
+    p.add_argument("--checkpoint-coap", default=None, help="trained COAP checkpoint (default: shipped)")
+    p.add_argument("--threads", type=int, default=None, help="torch CPU threads (>= 1; default: torch's)")
+    p.add_argument("--seed", type=int, default=0, help=f"{seed} (default 0)")
+    p.add_argument("--out", default=out, help=f"output folder (default {out})")
+    p.add_argument("--resume", action="store_true",
+                   help=resume or "reuse the finished case records in OUT/cases/ made by the same code, settings, "
+                                  "case and weights; compute only the others (a stopped run continues)")
+    p.add_argument("--render", type=int, default=render, help=f"figures of the first N cases (0: none; default {render})")
+    p.add_argument("--device", default="cpu", choices=["cpu", "cuda"], help="where the work runs (default cpu)")
+
+
+def parse_kinds(text: str, none: bool = False) -> list[str]:
+    """`--model` -> the kinds in order (a kind given twice counts once; the registry's names, volsmpl.volume.models,
+    and 'none' where the app allows it); ValueError naming the known kinds."""
+    from volsmpl.volume.models import parse_models
+
+    names = list(dict.fromkeys(k.strip() for k in str(text).split(",") if k.strip()))
+    if none and "none" in names:
+        rest = [k for k in names if k != "none"]
+        kinds = parse_models(",".join(rest)) if rest else []
+        return [k if k in kinds else "none" for k in names]
+    return parse_models(text)
+
+
+def check_threads(threads) -> None:
+    """`--threads N`: N >= 1 sets torch's CPU threads; None keeps torch's default."""
+    if threads is None:
+        return
+    if threads < 1:
+        raise ValueError(f"--threads {threads}: give a positive number of CPU threads (e.g. --threads 1)")
+    import torch
+
+    torch.set_num_threads(int(threads))
+
+
+def checkpoints(args, models: list[str]) -> dict:
+    """kind -> the checkpoint given for it (None: the shipped one) for the learned kinds of `models`. A checkpoint
+    given for a kind that does not run, or holding another kind, is refused in one line."""
+    from volsmpl.volume.models import expect_checkpoint_model
+
+    out = {}
+    for kind in ("volsmpl", "coap"):
+        path = getattr(args, f"checkpoint_{kind}", None)
+        if path and kind not in models:
+            raise ValueError(f"--checkpoint-{kind} is given but --model {','.join(models)} does not run {kind}: add it "
+                             f"to --model or drop the option")
+        if kind in models:
+            out[kind] = path or None
+        if path:
+            expect_checkpoint_model(path, kind, f"--checkpoint-{kind}",
+                                    "give it as --checkpoint-{held} (with {held} in --model).")
+    return out
+
+
+def check_common(args, none: bool = False) -> tuple[list[str], dict]:
+    """The shared options checked before any work: (kinds, checkpoints). Sets the thread count; creates --out."""
+    from volsmpl.io.outputs import check_writable
+
+    models = parse_kinds(args.model, none)
+    ckpts = checkpoints(args, models)
+    check_threads(args.threads)
+    if args.render < 0:
+        raise ValueError(f"--render {args.render}: give the number of cases to draw (0: none)")
+    check_writable(args.out, "dir", "--out")
+    return models, ckpts
+
+
+def volumes(body, models: list[str], ckpts: dict, device: str = "cpu", random_init: bool = False,
+            encoder_bf16: bool = False) -> dict:
+    """One volume per kind, attached to `body` on `device` (kind 'none': None). random_init: untrained networks;
+    encoder_bf16: the learned kinds' part encoder under bfloat16 autocast."""
+    import volsmpl
+    from volsmpl.volume.models import model_kind
+
+    out = {}
+    for m in models:
+        if m == "none":
+            out[m] = None
+            continue
+        learned = model_kind(m).learned
+        if random_init and learned:
+            vol = volsmpl.attach_volume(body, model=m, pretrained=False)
+        else:
+            vol = volsmpl.attach_volume(body, ckpts.get(m), model=m)
+        if learned:
+            vol.net.encoder_bf16 = encoder_bf16
+        out[m] = vol.to(device)
+    return out
+
+
+def checkpoint_names(models: list[str], ckpts: dict, random_init: bool = False) -> dict:
+    """kind -> what results.json records as its weights: the given path, the shipped asset, 'random init', or None
+    for a kind without weights."""
+    from volsmpl.volume.models import model_kind
+
+    names = {}
+    for m in models:
+        if m == "none" or not model_kind(m).learned:
+            names[m] = None
+        elif random_init:
+            names[m] = "random init"
+        else:
+            names[m] = str(ckpts.get(m) or f"core/assets/{model_kind(m).checkpoint}")
+    return names
+
+
+class CaseRecords:
+    """The finished cases of an app run in OUT/cases/ (volsmpl.io.case_store), each stored with the key of what
+    made it: the settings and inputs given, the volume's weights, the thread count and the source of volsmpl and
+    its apps. With resume=False every case is made again (and stored)."""
+
+    def __init__(self, out, app: str, resume: bool = False):
+        from volsmpl.io.case_store import CaseStore
+
+        self.app, self.store = app, CaseStore(Path(out) / "cases", resume=resume)
+
+    def key(self, spec: dict, volume=None) -> str:
+        import torch
+
+        from volsmpl.io.case_store import job_key
+
+        return job_key({**spec, "threads": torch.get_num_threads()}, modules=[] if volume is None else [volume],
+                       packages=["volsmpl.apps"])
+
+    def get(self, name: str, key: str):
+        return self.store.get(name, key)
+
+    def put(self, name: str, key: str, record) -> None:
+        self.store.put(name, key, record)
+
+    def get_or_make(self, name: str, spec: dict, volume, make: Callable[[], dict]) -> tuple[dict, bool]:
+        """(record, reused): the stored record of `name` when its key matches, else make() stored."""
+        key = self.key(spec, volume)
+        rec = self.store.get(name, key)
+        if rec is not None:
+            return rec, True
+        rec = make()
+        self.store.put(name, key, rec)
+        return rec, False
+
+    def note(self) -> str:
+        """The line a run prints when it reused records ('' when none)."""
+        s = self.store
+        if not s.reused:
+            return ""
+        return f"--resume: {s.reused} case record(s) reused from {s.folder}; {s.stale} stale record(s) made again"
+
+
+def envelope(app: str, config: dict, summary: dict, paper, cases: dict, meta: dict, figures: dict | None = None,
+             **extra) -> dict:
+    """The results.json of every app: {app, config, summary, paper, cases: {kind: [records]}, figures, meta, ...}."""
+    if not isinstance(cases, dict):
+        raise TypeError(f"cases must map each kind to its records, got {type(cases).__name__}")
+    return {"app": app, "config": config, "summary": summary, "paper": paper, "cases": cases,
+            "figures": figures or {}, "meta": meta, **extra}
+
+
+def write_results(out, result: dict, name: str = "results.json") -> Path:
+    """Write OUT/results.json atomically (a crash never leaves half a file); returns its path."""
+    from volsmpl.io.outputs import write_atomic
+
+    path = Path(out) / name
+    os.makedirs(path.parent, exist_ok=True)
+    write_atomic(path, json.dumps(result, indent=1))
+    return path
+
