@@ -1,5 +1,5 @@
-"""Per-body time by batch size, measured interleaved in one process: issue 28's "per-body time at B = 8 no higher
-than at B = 1" as a controlled comparison.
+"""Per-body time by batch size, measured interleaved in one process: whether the per-body time at B = 8 is no higher
+than at B = 1, as a controlled comparison.
 
 The model rows of `volsmpl bench` time each (model, B) in its own process, minutes apart; on a shared machine the
 drift between those runs (often 20-40 %) is larger than the effect of the batch. Here the same B bodies are

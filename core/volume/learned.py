@@ -41,42 +41,62 @@ from volsmpl.volume.api import BodyVolume, check_output
 
 
 class Volume(EncodingCache, LeanQuery, BodyVolume):
-    """Volumetric (SDF) extension of one body model; see the module docstring.
+    """Volumetric extension of one body model (signed distance, or occupancy for COAP); see the module docstring.
+    `attach_volume` builds it. Every switch below is also an attribute of the same name that may be changed on a
+    built volume (precision through `set_precision`); `volsmpl bench` measures its variants by them
+    (volsmpl.bench.variants).
 
     Args:
-        net: the network (VolumetricSMPLNet, or CoapNet for the occupancy baseline).
-        dense: evaluate every part decoder on every point (reference path) instead of only the
-            (point, part) pairs inside part boxes (default, same values and gradients).
-        chunk_elems: memory budget of one query chunk in (body, part, point) entries: of the dense and 'chunked'
-            paths, and of the lean path on the CPU, which also stops at cpu_chunk_elems; the lean path on other
-            devices takes gpu_chunk_elems instead (GPU_CHUNK_ELEMS). Peak bytes per entry of one no-grad chunk,
-            measured on the CPU at 60k points (2026-11-26): ~50 on 'chunked', ~100 on 'lean' where most points are
-            in no box (their box distances), less where most are in a box; ~70 on 'lean' on an H100.
-        engine: the sparse query path: 'lean' (default: `query` culls by boxes, runs the decoders on the pairs
-            inside, takes their minimum by one scatter and computes box distances only for the points in no box,
-            with one host sync) or 'chunked' (the engine before issue 28: every part's box distance at every
-            point, then the minimum over a dense (B, K, N) array).
-        pair_decoder: how the pairs are decoded: 'tiles' (default, NBWDecoder.decode_pairs: without gradients on
-            the CPU each (body, part) group's rows through its own weights, one addmm per layer and cache tile of
-            4,096 rows, volsmpl.nn.group_rows; otherwise pairs cut into equal chunks of one group each, only each
-            group's last chunk padded (~9 % of the rows on the benchmark's points), one batched matmul per layer) or 'grouped'
-            (one grouped matmul per layer over all pairs, no padding, no tiles: the operator count does not
-            depend on B or on the pairs, volsmpl.nn.grouped; on the project's AMD EPYC 1.3-2.5x slower than
-            'tiles', as its activations leave the cache; on its Intel Xeon at 60k points, 2026-11-26: 0.85x the
-            query time of 'tiles' on one thread at B = 1, 1.25x on two, equal at B = 8). 'grouped' falls back to
-            'tiles' where the network or dtype has no grouped matmul (COAP, float64, float32 on CUDA).
-        precision: the decoders' arithmetic on the sparse path, 'full' (default), 'bf16' or 'tf32' (volsmpl.volume.precision;
-            `set_precision`). The dense reference path always runs in full precision.
-        cuda_graphs: encode CUDA body outputs under torch.no_grad() by replaying a captured CUDA graph
-            (volsmpl.volume.engine.encode_graph: one per batch shape, the eager encode's values bit for bit; all parts are
-            encoded, also where a query needs only some). On by default: on an H200 at 60k points it took encode
-            + query from 8.4 to 3.4 ms at B = 1 and 9.5 to 6.4 ms at B = 8 (docs/bench_cuda.md). No effect on a
-            CPU or with autograd on (the apps' optimisation steps).
-        cuda_graph_queries: answer no-grad lean queries on CUDA by replaying a captured static-shape query
-            (volsmpl.volume.engine.query_graph: one per batch shape and pair capacity, learnt from the first, eager query of that
-            shape; the eager query's values up to rounding; one host read, as the eager one). Off by default until
-            measured on a GPU; needs an encoding of all parts (`cuda_graphs` makes those), full or tf32 precision,
-            and one lean chunk.
+        net: the network: VolumetricSMPLNet (signed distance) or CoapNet (occupancy, the COAP baseline).
+        partition: the body's parts (volsmpl.body.partition.Partition): part frames, padded part boxes and the
+            surface samples the encoder reads.
+        fingerprint: the fingerprint of the body model the volume belongs to (volsmpl.body.fingerprint).
+        dense: False (default): part decoders only on the (point, part) pairs inside padded part boxes, the
+            analytic box distance elsewhere. True: every part decoder on every point (the reference path; the
+            same values and gradients).
+        chunk_elems: memory budget of one query chunk in (body, part, point) entries, default 2^21: of the dense
+            and 'chunked' paths, and of the lean path on the CPU, which also stops at `cpu_chunk_elems` (default
+            CPU_CHUNK_ELEMS = 2^20); the lean path on other devices takes `gpu_chunk_elems` instead (default
+            GPU_CHUNK_ELEMS = 2^24). Peak bytes per entry of one no-grad chunk at 60k points: on the CPU ~50 on
+            'chunked', ~100 on 'lean' where most points are in no box (their box distances), less where most are
+            in a box (commit 2674b94); on an H100 ~70 on 'lean' (538 MiB for the 7.7 M entries of B = 8 in one
+            chunk, row 'volsmpl-onechunk' of `volsmpl bench --device cuda --batch 1 8 --points 60000`, commit
+            508d1c0, docs/bench_cuda.md).
+        engine: the sparse query path of SDF models, 'lean' (default) or 'chunked'; occupancy models (COAP) take
+            the 'chunked' path either way. 'lean' (volsmpl.volume.engine.lean_query): one box test, the decoders
+            on the pairs inside, their minimum by one scatter, box distances only for the points in no box, one
+            host sync per chunk. 'chunked': every part's box distance at every point, then the minimum over a
+            dense (B, K, N) array, in chunks of chunk_elems.
+        pair_decoder: how the sparse path decodes its pairs, 'tiles' (default) or 'grouped'. 'tiles'
+            (NBWDecoder.decode_pairs): without gradients on the CPU each (body, part) group's rows through its own
+            weights, one addmm per layer and cache tile of 4,096 rows (volsmpl.nn.group_rows); otherwise the pairs
+            cut into equal chunks of one group each, only each group's last chunk padded (~9 % of the rows on the
+            benchmark's points), one batched matmul per layer. 'grouped' (volsmpl.nn.grouped): one grouped matmul
+            per layer over all pairs, no padding, no tiles, so that the operator count depends neither on B nor
+            on the pairs; it falls back to 'tiles' where the network or dtype has no grouped matmul (COAP,
+            float64, float32 on CUDA). Against 'tiles' it was 1.3-2.5x slower on an AMD EPYC, as its activations
+            leave the cache (commit 2a5c7fd); on an Intel Xeon at 60k points its query took 0.85x the time on one
+            thread at B = 1, 1.25x on two, the same at B = 8 (bench variants 'volsmpl-grouped' and
+            'volsmpl-tiles', commit 471cfd1).
+        precision: the decoders' arithmetic on the sparse path (volsmpl.volume.precision, `set_precision`): 'full'
+            (default: the volume's dtype), 'bf16' (the decoder layers in bfloat16 on the grouped engine, for
+            networks that have one) or 'tf32' (float32 matmuls on TF32 tensor cores, CUDA only). The dense
+            reference path always runs in full precision.
+        cuda_graphs: True (default): the encode of a CUDA body output under torch.no_grad() replays a captured CUDA
+            graph (volsmpl.volume.engine.encode_graph: one per batch shape, the eager encode's values bit for bit;
+            all parts are encoded, also where a query needs only some). False: the encode runs op by op. No effect
+            on a CPU, with autograd on (the apps' optimisation steps) or with code refinement. On an H200 at 60k
+            points the replay took encode + query from 8.4 to 3.4 ms at B = 1 and from 9.5 to 6.4 ms at B = 8
+            (`volsmpl bench --device cuda --models volsmpl,volsmpl-graphs --batch 1 8 --points 60000 --repeats
+            10 --warmup 2 --budget 5 --quick --no-bodybody` at commit fcde88a, where 'volsmpl' encoded op by op
+            and 'volsmpl-graphs' replayed; docs/bench_cuda.md).
+        cuda_graph_queries: False (default): no-grad lean queries run eagerly. True: on CUDA they replay a captured
+            static-shape query (volsmpl.volume.engine.query_graph: one per batch shape and pair capacity, the
+            capacity learnt from the first, eager query of that shape; the eager query's values up to rounding;
+            one host read, as the eager one), when the encoding holds all parts (`cuda_graphs` makes such
+            encodings), the precision is 'full' or 'tf32' and the query is one lean chunk that needs the box
+            distances (collision_loss's do not). Off by default as it has not been timed on a GPU (bench variant
+            'volsmpl-qgraph' times it).
     """
 
     ENGINES = ("lean", "chunked")

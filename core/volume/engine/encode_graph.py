@@ -2,7 +2,8 @@
 
 On a GPU the encode of a body output (part frames, padded boxes, fixed surface samples, PointNet, decoder-weight
 generation) is a few hundred small kernels whose shapes depend only on the output's shapes: at B = 1 the host
-spends ~3.6 ms issuing them for ~0.5 ms of device work (docs/bench_cuda.md). Captured once in a CUDA graph, one
+spends ~3.6 ms issuing them for ~0.5 ms of device work (H200, `python docs/scripts/cuda_profile.py --device cuda
+--batch 1 8` at commit 37ed706; docs/bench_cuda.md). Captured once in a CUDA graph, one
 replay issues them all: the new output's vertices, joints and full_pose are copied into the graph's static inputs,
 the graph is replayed, and its outputs are cloned into a new `Encoding` (a later replay never changes an encoding
 handed out before).
@@ -71,8 +72,8 @@ class _Same:
 def settings_key(modules) -> tuple:
     """The plain settings (bool, int, float, str, None; dataclass configs by their repr, frozen ones by identity:
     a frozen config is replaced, not edited) of `modules` and their submodules, in a fixed order (each module's
-    attribute order). ~0.15 ms for the shipped network and partition on one CPU thread (a sorted walk with every
-    config's repr took 0.48 ms: the PartTable's repr prints its collision mask)."""
+    attribute order). ~0.15 ms for the shipped network and partition on one CPU thread, where a sorted walk with
+    every config's repr took 0.48 ms (the PartTable's repr prints its collision mask; commit fcde88a)."""
     out = []
     for i, module in enumerate(modules):
         for name, m in module.named_modules():

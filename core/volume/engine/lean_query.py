@@ -121,13 +121,15 @@ class LeanQuery:
             res = res.scatter_reduce(0, b * N + n, vals, "amin", include_self=False)
         return res.view(B, N)
 
-    #: on the CPU a lean chunk holds at most this many (body, part, point) entries (its arrays then stay in cache):
-    #: at 60k points, 2 bodies per chunk cost 1.5x per body what 1 body per chunk costs (B = 8, 1 thread, 2026-11-25);
-    #: the default of `cpu_chunk_elems` (bench model 'volsmpl-onechunk' measures one chunk for the whole batch)
+    #: on the CPU a lean chunk holds at most this many (body, part, point) entries, one body at 60k points, so that
+    #: its arrays stay in cache: a cached query of B = 8 bodies x 60k points on one thread took 63-75 ms per body
+    #: with one body per chunk against 99-140 ms with two (the two layouts interleaved in one process, commit
+    #: b1b26c3). The default of `cpu_chunk_elems`; bench variant 'volsmpl-onechunk' runs the whole batch in one chunk
     CPU_CHUNK_ELEMS = 1 << 20
-    #: on other devices (GPUs) a lean chunk holds at most this many entries (~1.1 GiB at ~70 B each): at 60k points
-    #: B = 8 runs in one chunk, 2.6x faster than in four of 2 bodies on an H100 (docs/bench_cuda.md, 2026-11-26,
-    #: where the first one-chunk row is 'volsmpl-onechunk'); the default of `gpu_chunk_elems`
+    #: on other devices (GPUs) a lean chunk holds at most this many entries (~1.1 GiB at ~70 B each), B = 8 at 60k
+    #: points in one chunk: on an H100 encode + query of B = 8 took 11.6 ms in one chunk against 30.7 ms in four
+    #: chunks of two bodies (rows 'volsmpl-onechunk' and 'volsmpl' of `volsmpl bench --device cuda --batch 1 8
+    #: --points 60000 --repeats 10`, commit 508d1c0, docs/bench_cuda.md). The default of `gpu_chunk_elems`
     GPU_CHUNK_ELEMS = 1 << 24
 
     def _lean_chunks(self, B: int, N: int, device=None) -> list:

@@ -2,7 +2,8 @@
 when `cuda_graph_queries` is on).
 
 On a GPU the lean query of one body (volsmpl.volume.engine.lean_query) is ~180 small kernels and one host read of its pair counts:
-at B = 1 and 60k points the host issuing them, not the device, sets its 2.3 ms (docs/bench_cuda.md). Its shapes
+at B = 1 and 60k points the host issuing them, not the device, sets its 2.3 ms (H200, t query of `volsmpl bench
+--device cuda --batch 1 8 --points 60000` at commit fcde88a; docs/bench_cuda.md). Its shapes
 depend on the data (the (point, part) pairs inside boxes, the points in no box), so it cannot be captured as it is.
 `static_lean_query` computes the same values with shapes fixed by (B, N, K) and a pair `capacity`:
 
