@@ -38,9 +38,10 @@ __all__ = ["add_common", "check_common", "check_threads", "parse_kinds", "checkp
 
 
 
-def add_common(p, *, out: str, model: str = "volsmpl,coap,mesh", none: bool = False, render: int = 3,
-               seed: str = "the seed of the case data", resume: str | None = None) -> None:
-    """Add the shared options to an app's parser (module docstring); `none`: the app accepts the kind 'none'."""
+def add_common(p, *, out: str | None, model: str = "volsmpl,coap,mesh", none: bool = False, render: int = 3,
+               seed: str | None = "the seed of the case data", resume: str | None = None) -> None:
+    """Add the shared options to an app's parser (module docstring); `none`: the app accepts the kind 'none';
+    seed=None: the app has no seeded case data (no --seed)."""
     from volsmpl.volume.models import MODELS
 
     kinds = ("none, " if none else "") + ", ".join(MODELS)
@@ -48,8 +49,9 @@ def add_common(p, *, out: str, model: str = "volsmpl,coap,mesh", none: bool = Fa
     p.add_argument("--checkpoint-volsmpl", default=None, help="trained VolumetricSMPL checkpoint (default: shipped)")
     p.add_argument("--checkpoint-coap", default=None, help="trained COAP checkpoint (default: shipped)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads (>= 1; default: torch's)")
-    p.add_argument("--seed", type=int, default=0, help=f"{seed} (default 0)")
-    p.add_argument("--out", default=out, help=f"output folder (default {out})")
+    if seed is not None:
+        p.add_argument("--seed", type=int, default=0, help=f"{seed} (default 0)")
+    p.add_argument("--out", default=out, help=f"output folder (default {out or 'by action'})")
     p.add_argument("--resume", action="store_true",
                    help=resume or "reuse the finished case records in OUT/cases/ made by the same code, settings, "
                                   "case and weights; compute only the others (a stopped run continues)")

@@ -3,25 +3,25 @@ Table 4, supp. D.2).
 
     volsmpl egohmr make-data                                  # the generated frames (train / val / test), cached
     volsmpl egohmr train --out runs/egohmr [--steps 4000] [--resume]
-    volsmpl egohmr tune --split val --out docs/egohmr/tune.json     # guidance scale per guide, on val
-    volsmpl egohmr sample --guide none,volsmpl,coap,mesh --split test [--frames N] --out out/egohmr
+    volsmpl egohmr tune --split val --out docs/egohmr                # guidance scale per guide, on val: tune.json
+    volsmpl egohmr sample --model none,volsmpl,coap,mesh --split test [--frames N] --out out/egohmr
     volsmpl egohmr sample --frame my_frame.json --scene scan.ply [--units mm] [--up z] --out out/mine   # userframe.py
 
-Writes OUT/results.json (config, options, summary.<guide>, the paper's Table 4, per-frame records, the measured
-largest batch per guide, machine meta) and OUT/frame_<name>.png for the first --render frames.
+Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<guide>, the paper's Table 4, per-frame
+records per guide, figures, meta; then the regressor's row and the measured largest batch per guide) and
+OUT/frame_<name>.png for the first --render frames.
 """
 from __future__ import annotations
 
-import json
-from dataclasses import asdict
-from pathlib import Path
+from volsmpl.apps.table import add_common, check_common
 
-import torch
+from .options import GUIDES, PAPER_SCALE, TUNE_FACTORS, options_of, parse_guides, scales_of
+
+#: --out of each action when none is given
+DEFAULT_OUT = {"sample": "out/egohmr", "user": "out/egohmr_user", "tune": "out/egohmr", "train": "runs/egohmr",
+               "make-data": None}
 
 ACTIONS = ("sample", "make-data", "train", "tune")
-GUIDES = ("none", "volsmpl", "coap", "mesh")
-PAPER_SCALE = {"volsmpl": 30.0, "coap": 0.4, "mesh": 30.0}
-TUNE_FACTORS = (0.1, 0.3, 1.0, 3.0, 10.0)
 
 
 def add_parser(sub):
@@ -31,12 +31,16 @@ def add_parser(sub):
     p = sub.add_parser("egohmr", help="egocentric body recovery with collision-guided diffusion (Table 4)",
                        description="Sample body poses from a keypoint- and scene-conditioned diffusion model, guided "
                                    "away from the scene by VolumetricSMPL, COAP or the exact mesh (supp. D.2).")
-    p.add_argument("action", nargs="?", default="sample", choices=ACTIONS)
-    p.add_argument("--guide", default="none,volsmpl,coap,mesh", help=f"comma-separated guides ({', '.join(GUIDES)})")
+    p.add_argument("action", nargs="?", default="sample", choices=ACTIONS,
+                   help="sample (default): every guide samples the frames; tune: the guidance scale per guide on the "
+                        "val split (OUT/tune.json); make-data: the generated frames; train: the network")
+    add_common(p, out=None, model="none,volsmpl,coap,mesh", none=True, render=4,
+               seed="the seed of the frames and of the sampler's noise",
+               resume="sample: reuse each guide's finished samples in OUT/cases/ made by the same code, settings, "
+                      "frames and weights; train: continue OUT's run")
     p.add_argument("--split", default="test", choices=["train", "val", "test"])
     p.add_argument("--frames", type=int, default=None, help="the first N frames of the split (default: all)")
-    p.add_argument("--out", default=None, help="output folder (sample: out/egohmr; train: runs/egohmr) or file (tune)")
-    p.add_argument("--checkpoint", default=None, help="egohmr checkpoint (default: the shipped one)")
+    p.add_argument("--checkpoint", default=None, help="the egohmr network's checkpoint (default: the shipped one)")
     p.add_argument("--scale", action="append", default=[], metavar="GUIDE=A",
                    help="guidance scale a of a guide (repeatable); default: --tuned's, else the paper's "
                         f"({', '.join(f'{k} {v:g}' for k, v in PAPER_SCALE.items())})")
@@ -56,74 +60,38 @@ def add_parser(sub):
     p.add_argument("--batch", type=int, default=16, help="frames sampled together")
     p.add_argument("--budget-mb", type=float, default=2048.0, help="memory budget of the measured largest batch")
     p.add_argument("--no-max-batch", action="store_true", help="skip measuring the largest batch")
-    p.add_argument("--render", type=int, default=4, help="figures for the first N frames")
-    p.add_argument("--seed", type=int, default=0, help="data and sampling seed")
-    p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
     p.add_argument("--frame", default=None, help="sample: a user's frame file (JSON, apps/egohmr/userframe.py)")
     p.add_argument("--scene", default=None, help="with --frame: the scene (mesh or point cloud file)")
     p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="--scene's units")
     p.add_argument("--up", default="y", choices=["y", "z"],
                    help="--scene's up axis: a z-up scan is turned Y-up before the frame's world_to_camera applies")
     p.add_argument("--steps", type=int, default=d.steps, help="train: optimisation steps")
-    p.add_argument("--resume", action="store_true", help="train: continue OUT's run")
     return p
 
 
-def parse_guides(text: str) -> list[str]:
-    names = list(dict.fromkeys(g.strip() for g in str(text).split(",") if g.strip()))
-    bad = [g for g in names if g not in GUIDES]
-    if bad or not names:
-        raise ValueError(f"unknown guide(s) {bad or text!r}; --guide takes a comma-separated list of {', '.join(GUIDES)}")
-    return names
-
-
-def scales_of(args, guides: list[str]) -> dict:
-    """Guide -> scale: --scale over --tuned over the paper's."""
-    out = {g: PAPER_SCALE.get(g, 0.0) for g in guides}
-    if args.tuned:
-        best = json.loads(Path(args.tuned).read_text()).get("best", {})
-        out.update({g: float(best[g]) for g in guides if g in best})
-    for item in args.scale:
-        g, _, v = item.partition("=")
-        if g not in GUIDES or g == "none" or not v:
-            raise ValueError(f"--scale {item!r}: write GUIDE=A with GUIDE one of volsmpl, coap, mesh")
-        try:
-            out[g] = float(v)
-        except ValueError:
-            raise ValueError(f"--scale {item!r}: {v!r} is not a number") from None
-    out["none"] = 0.0
-    return {g: out[g] for g in guides}
-
-
-def options_of(args, scale: float):
-    from .evaluate import GuideOptions
-
-    if not 0 <= args.plain_steps <= args.guide_steps:
-        raise ValueError(f"--plain-steps {args.plain_steps} must lie in 0..--guide-steps ({args.guide_steps})")
-    return GuideOptions(scale=scale, steps=args.guide_steps, plain_steps=args.plain_steps,
-                        plain_factor=args.plain_factor, wrt=args.wrt, joints=args.joints, reduce=args.reduce)
-
-
 def run(args) -> int:
-    from volsmpl.runtime.devices import check_device
-
-    check_device(args.device)
-    if args.threads:
-        torch.set_num_threads(args.threads)
+    user = args.action == "sample" and bool(args.frame or args.scene)
+    if args.out is None and DEFAULT_OUT["user" if user else args.action]:
+        args.out = DEFAULT_OUT["user" if user else args.action]
     if args.batch < 1:
         raise ValueError(f"--batch must be >= 1, got {args.batch}")
     if args.frames is not None and args.frames < 1:
         raise ValueError(f"--frames must be >= 1, got {args.frames}")
-    if args.encoder_bf16:
-        from volsmpl.volume.models import model_kind
+    if args.action in ("sample", "tune"):
+        models, _ = check_common(args, none=True)
+        if args.encoder_bf16:
+            from volsmpl.volume.models import model_kind
 
-        if args.action not in ("sample", "tune"):
+            if not any(g != "none" and model_kind(g).learned for g in models):
+                raise ValueError(f"--encoder-bf16 sets the learned guides' encoder arithmetic, but --model "
+                                 f"{args.model} has none: add volsmpl or coap, or drop the flag")
+    else:
+        from volsmpl.apps.table import check_threads
+
+        check_threads(args.threads)
+        if args.encoder_bf16:
             raise ValueError(f"--encoder-bf16 sets the guides' encoder arithmetic: it applies to sample and tune, "
                              f"not {args.action}; drop it")
-        if not any(g != "none" and model_kind(g).learned for g in parse_guides(args.guide)):
-            raise ValueError(f"--encoder-bf16 sets the learned guides' encoder arithmetic, but --guide {args.guide} "
-                             f"has none: add volsmpl or coap, or drop the flag")
     if args.action == "make-data":
         from .data import make_frames
 
@@ -135,14 +103,14 @@ def run(args) -> int:
         from .train import TrainSettings, train
 
         s = TrainSettings(steps=args.steps, seed=args.seed, threads=args.threads, device=args.device)
-        path = train(args.out or "runs/egohmr", s, resume=args.resume)
+        path = train(args.out, s, resume=args.resume)
         print(f"wrote {path}.safetensors")
         return 0
     from .run import run_sample, run_tune, run_user_frame
 
     if args.action == "tune":
         return run_tune(args)
-    return run_user_frame(args) if (args.frame or args.scene) else run_sample(args)
+    return run_user_frame(args) if user else run_sample(args)
 
 
-__all__ = ["add_parser", "run", "parse_guides", "scales_of", "options_of", "GUIDES", "PAPER_SCALE"]
+__all__ = ["add_parser", "run", "parse_guides", "scales_of", "options_of", "GUIDES", "PAPER_SCALE", "TUNE_FACTORS"]

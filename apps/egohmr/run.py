@@ -1,4 +1,4 @@
-"""The `sample` and `tune` jobs of `volsmpl egohmr` (cli.py parses; this runs).
+"""The `sample` and `tune` jobs of `volsmpl egohmr` (cli.py parses; this runs), and a user's own frame.
 
 sample: every guide samples the same frames from the same noise; each is scored by the same exact tests;
 results.json is rewritten after every guide (a long run stopped early keeps its finished guides).
@@ -42,69 +42,86 @@ def _setup(args, split: str):
     return body, net, meta, frames, prep, scenes
 
 
-def _volume(guide: str, device="cpu", encoder_bf16: bool = False):
-    """The guide's volume (None for 'none'); a learned one's part encoder under bfloat16 autocast with encoder_bf16."""
+def _volumes(args, guides: list[str], device) -> dict:
+    """guide -> its volume (None for 'none'), on a body of their own (volsmpl.apps.table.volumes)."""
     import volsmpl
-    from volsmpl.volume.models import model_kind
+    from volsmpl.apps.table import checkpoints, volumes
 
-    if guide == "none":
-        return None
-    vol = volsmpl.attach_volume(volsmpl.create_body(), model=guide).to(device)
-    if model_kind(guide).learned:
-        vol.net.encoder_bf16 = encoder_bf16
-    return vol
+    return volumes(volsmpl.create_body(), guides, checkpoints(args, guides), device, encoder_bf16=args.encoder_bf16)
+
+
+def _config(args, guides: list[str], scales: dict, frames: int, split: str) -> dict:
+    """What a sample or tune result records of its settings (results.json's config)."""
+    from volsmpl.apps.table import checkpoint_names, checkpoints
+
+    return {"split": split, "frames": frames, "seed": args.seed, "models": guides, "scales": scales,
+            "encoder_bf16": args.encoder_bf16, "batch": args.batch, "budget_mb": args.budget_mb,
+            "network": args.checkpoint or "apps/egohmr/egohmr_anny",
+            "checkpoints": checkpoint_names(guides, checkpoints(args, guides)), "threads": torch.get_num_threads()}
 
 
 def run_sample(args) -> int:
-    from volsmpl.report import paper
-    from volsmpl.io.outputs import check_writable, write_atomic
+    from volsmpl.apps.table import CaseRecords, envelope, write_results
+    from volsmpl.geometry.point_mesh_distance import winding_numbers
     from volsmpl.io.provenance import machine_info
+    from volsmpl.report import paper
 
-    from .cli import options_of, parse_guides, scales_of
     from .evaluate import max_batch, sample_frames, summarize
     from .figures import frame_figure
-    from volsmpl.geometry.point_mesh_distance import winding_numbers
-
+    from .options import options_of, parse_guides, scales_of
     from .pose import pose_body
 
-    guides = parse_guides(args.guide)
+    guides = parse_guides(args.model)
     scales = scales_of(args, guides)
-    out = check_writable(args.out or "out/egohmr", "dir", "--out")
+    out = Path(args.out)
     body, net, meta, frames, prep, scenes = _setup(args, args.split)
+    vols = _volumes(args, guides, body.v_template.device)
+    store = CaseRecords(out, "egohmr", resume=args.resume)
     summary, records, options, batches = {}, {}, {}, {}
     # the no-diffusion baseline: the regressor's own pose, scored by the same tests (not a guide: no row in Table 4)
     reg = summarize(sample_frames(net, body, frames, prep, batch=args.batch, scenes=scenes, poses=prep["pose_reg"]))
     reg.pop("s_per_frame")
     print(f"regressor (no diffusion): MPJPE {reg['mpjpe_mm']:.1f} mm (vis. {reg['mpjpe_visible_mm']:.1f}, invis. "
           f"{reg['mpjpe_invisible_mm']:.1f})  collision {reg['collision_ratio']:.4f}")
+    config = _config(args, guides, scales, len(frames), args.split)
+    config["checkpoint_meta"] = {k: meta.get(k) for k in ("step", "validation", "train_frames", "seconds")}
     for g in guides:
         opts = options_of(args, scales[g])
-        vol = _volume(g, args.device, args.encoder_bf16)
-        recs = sample_frames(net, body, frames, prep, vol, opts, batch=args.batch, seed=args.seed, scenes=scenes)
-        s = summarize(recs)
-        s["sample_batch"] = args.batch
-        if not args.no_max_batch:  # peak memory of one guided step, measured alone (no polling during the run)
-            one = {k: v[:1] for k, v in prep.items()}
-            mb = max_batch(net, body, one, vol, opts, args.budget_mb, device=args.device, also=(args.batch,))
-            s["max_batch"], s["peak_mem_mb"] = mb["max_batch"], mb["measured_mb"][str(args.batch)]
-            batches[g] = mb
+        vol = vols[g]
+
+        def make():
+            recs = sample_frames(net, body, frames, prep, vol, opts, batch=args.batch, seed=args.seed, scenes=scenes)
+            s = summarize(recs)
+            s["sample_batch"] = args.batch
+            mb = None
+            if not args.no_max_batch:  # peak memory of one guided step, measured alone (no polling during the run)
+                one = {k: v[:1] for k, v in prep.items()}
+                mb = max_batch(net, body, one, vol, opts, args.budget_mb, device=args.device, also=(args.batch,))
+                s["max_batch"], s["peak_mem_mb"] = mb["max_batch"], mb["measured_mb"][str(args.batch)]
+            return {"summary": s, "max_batch": mb, "records": recs}
+
+        spec = {**config, "guide": g, "options": asdict(opts), "frame_names": [f.name for f in frames],
+                "no_max_batch": args.no_max_batch}
+        done, reused = store.get_or_make(f"guide_{g}", spec, vol, make)
+        s = done["summary"]
+        if done["max_batch"] is not None:
+            batches[g] = done["max_batch"]
         summary[g], options[g] = s, asdict(opts)
-        records[g] = [{k: v for k, v in r.items() if k != "pose"} for r in recs]
+        records[g] = [{k: v for k, v in r.items() if k != "pose"} for r in done["records"]]
         print(f"{g:8s} a={scales[g]:<6g} MPJPE {s['mpjpe_mm']:.1f} mm (vis. {s['mpjpe_visible_mm']:.1f}, invis. "
               f"{s['mpjpe_invisible_mm']:.1f})  PA {s['pa_mpjpe_mm']:.1f}  collision {s['collision_ratio']:.4f}  "
               f"contact {s['contact_pct']:.0f} %  {s['s_per_frame']:.3f} s/frame"
-              + (f"  max batch {s['max_batch']} in {args.budget_mb:g} MB" if "max_batch" in s else ""))
-        for r, rec in zip(records[g], recs):
+              + (f"  max batch {s['max_batch']} in {args.budget_mb:g} MB" if "max_batch" in s else "")
+              + ("  (reused)" if reused else ""))
+        for r, rec in zip(records[g], done["records"]):
             r["_pose"] = rec["pose"]
-        result = {"split": args.split, "frames": len(frames), "seed": args.seed, "guides": guides, "scales": scales,
-                  "options": options, "encoder_bf16": args.encoder_bf16, "regressor": reg, "budget_mb": args.budget_mb, "max_batch": batches, "summary": summary,
-                  "paper": paper.rows("egohmr"), "checkpoint": args.checkpoint or "apps/egohmr/egohmr_anny",
-                  "checkpoint_meta": {k: meta.get(k) for k in ("step", "validation", "train_frames", "seconds")},
-                  "cases": {k: [{kk: vv for kk, vv in r.items() if kk != "_pose"} for r in v] for k, v in records.items()},
-                  "meta": machine_info(args.device)}
+        extra = {"options": options, "regressor": reg, "max_batch": batches}
         if args.tuned:
-            result["tuning"] = json.loads(Path(args.tuned).read_text())
-        write_atomic(out / "results.json", json.dumps(result, indent=1))
+            extra["tuning"] = json.loads(Path(args.tuned).read_text())
+        result = envelope("egohmr", config, summary, paper.rows("egohmr"),
+                          {k: [{kk: vv for kk, vv in r.items() if kk != "_pose"} for r in v] for k, v in records.items()},
+                          machine_info(args.device), **extra)
+        write_results(out, result)
     # figures: the first frames, every guide's sample with the scene points inside it
     faces = torch.as_tensor(body.faces, device=prep["kp"].device)
     figs = {}
@@ -126,23 +143,24 @@ def run_sample(args) -> int:
         frame_figure(out / name, f, scenes[i], gt.cpu().numpy(), samples, body.faces, inside)
         figs[f.name] = name
     result["figures"] = figs
-    for v in result["cases"].values():
-        for r in v:
-            r.pop("_pose", None)
-    write_atomic(out / "results.json", json.dumps(result, indent=1))
+    write_results(out, result)
+    note = store.note()
+    if note:
+        print(note)
     print(format_table(summary))
     print(f"wrote {out / 'results.json'}")
     return 0
 
 
 def run_tune(args) -> int:
-    from volsmpl.io.outputs import check_writable, write_atomic
     from volsmpl.io.provenance import machine_info
 
-    from .cli import PAPER_SCALE, options_of, parse_guides
-    from .evaluate import sample_frames, summarize
+    from volsmpl.apps.table import write_results
 
-    guides = [g for g in parse_guides(args.guide) if g != "none"]
+    from .evaluate import sample_frames, summarize
+    from .options import PAPER_SCALE, options_of, parse_guides
+
+    guides = [g for g in parse_guides(args.model) if g != "none"]
     try:
         factors = [float(f) for f in args.factors.split(",") if f.strip()]
     except ValueError:
@@ -152,15 +170,15 @@ def run_tune(args) -> int:
     split = args.split if args.split != "test" else "val"
     if args.split == "test":
         print("tune: tuning runs on the val split (the test split is for reporting only)")
-    path = check_writable(args.out or "out/egohmr_tune.json", "file", "--out")
     body, net, meta, frames, prep, scenes = _setup(args, split)
+    vols = _volumes(args, guides, body.v_template.device)
     base = summarize(sample_frames(net, body, frames, prep, None, None, args.batch, args.seed, scenes))
     print(f"{len(frames)} {split} frames; unguided first")
     rows = [{"guide": "none", "scale": 0.0, **base}]
     print(f"none     MPJPE {base['mpjpe_mm']:.1f}  collision {base['collision_ratio']:.4f}")
     best = {}
     for g in guides:
-        vol = _volume(g, args.device, args.encoder_bf16)
+        vol = vols[g]
         cands = []
         for f in factors:
             a = PAPER_SCALE[g] * f
@@ -173,8 +191,8 @@ def run_tune(args) -> int:
     doc = {"split": split, "frames": len(frames), "rule": f"lowest collision ratio with MPJPE within "
            f"{TUNE_MPJPE_SLACK_MM} mm of the unguided sampler's", "factors": factors,
            "paper_scales": PAPER_SCALE, "encoder_bf16": args.encoder_bf16, "rows": rows, "best": best,
-           "meta": machine_info(args.device)}
-    write_atomic(path, json.dumps(doc, indent=1))
+           "config": _config(args, guides, {}, len(frames), split), "meta": machine_info(args.device)}
+    path = write_results(args.out, doc, "tune.json")
     print(f"best scales {best}; wrote {path}")
     return 0
 
@@ -197,14 +215,15 @@ def run_user_frame(args) -> int:
     the scan's points), and a figure; no ground truth, so no joint errors."""
     import volsmpl
     from volsmpl.geometry.point_mesh_distance import winding_numbers
-    from volsmpl.io.outputs import check_writable, write_atomic
     from volsmpl.io.provenance import machine_info
     from volsmpl.viz.render import render_camera_view, grid, save_png
     from volsmpl.scene.scan import read_scan, to_y_up
     from scipy.spatial import cKDTree
 
-    from .cli import options_of, parse_guides, scales_of
+    from volsmpl.apps.table import envelope, write_results
+
     from .dataset import keypoint_input
+    from .options import options_of, parse_guides, scales_of
     from .evaluate import draw
     from .figures import camera_of
     from .pose import pose_body
@@ -213,14 +232,12 @@ def run_user_frame(args) -> int:
 
     if not (args.frame and args.scene):
         raise ValueError("a user's frame needs both --frame FILE.json and --scene SCAN (see apps/egohmr/userframe.py)")
-    guides = parse_guides(args.guide)
+    guides = parse_guides(args.model)
     scales = scales_of(args, guides)
-    out = check_writable(args.out or "out/egohmr_user", "dir", "--out")
+    out = Path(args.out)
     frame = load_user_frame(args.frame)
     scan = camera_points(frame, to_y_up(read_scan(args.scene, args.units, n_surface=1_000_000, seed=args.seed), args.up))
-    from volsmpl.runtime.devices import check_device
-
-    dev = check_device(args.device)
+    dev = torch.device(args.device)
     body = volsmpl.create_body().to(dev)
     net, meta = load_model(args.checkpoint, body)
     net.to(dev)
@@ -237,8 +254,9 @@ def run_user_frame(args) -> int:
     faces = torch.as_tensor(body.faces, device=dev)
     summary, panels = {}, []
     cam = camera_of(frame.K, frame.image_size)
+    vols = _volumes(args, guides, dev)
     for g in guides:
-        vol = _volume(g, dev, args.encoder_bf16)
+        vol = vols[g]
         t0 = time.perf_counter()
         x, _ = draw(net, body, d, vol, options_of(args, scales[g]), seed=args.seed)
         secs = time.perf_counter() - t0
@@ -259,10 +277,12 @@ def run_user_frame(args) -> int:
         print(f"{g:8s} collision {summary[g]['collision_ratio']:.4f}  contact {summary[g]['contact_pct']:.0f} %  "
               f"{secs:.2f} s")
     save_png(out / f"frame_{frame.name}.png", grid([p[0] for p in panels], [p[1] for p in panels], cols=2))
-    doc = {"frame": str(args.frame), "scene": str(args.scene), "units": args.units, "up": args.up, "guides": guides,
-           "scales": scales, "encoder_bf16": args.encoder_bf16, "summary": summary, "pelvis": centre.tolist(), "figures": {frame.name: f"frame_{frame.name}.png"},
-           "checkpoint": args.checkpoint or "apps/egohmr/egohmr_anny", "meta": machine_info(args.device)}
-    write_atomic(out / "results.json", json.dumps(doc, indent=1))
+    config = {**_config(args, guides, scales, 1, "user"), "frame": str(args.frame), "scene": str(args.scene),
+              "units": args.units, "up": args.up}
+    result = envelope("egohmr", config, summary, None, {g: [{"name": frame.name, **s}] for g, s in summary.items()},
+                      machine_info(args.device),
+                      {frame.name: f"frame_{frame.name}.png"}, pelvis=centre.tolist())
+    write_results(out, result)
     print(f"wrote {out / 'results.json'}")
     return 0
 

@@ -28,7 +28,7 @@ def run_tune(args, cases: list) -> int:
     import volsmpl
     from volsmpl.apps.table import check_common, checkpoint_names, volumes, write_results
 
-    from .cli import case_line
+    from .console import case_line
     from .fit import FitConfig, Problem, fit_case
 
     try:

@@ -73,7 +73,7 @@ def test_a_few_training_steps_lower_the_loss(body):
 def test_cli_sample_writes_results_and_figures(tmp_path, tiny_ckpt):
     ckpt, _ = tiny_ckpt
     out = tmp_path / "out"
-    rc = main(["egohmr", "sample", "--guide", "none,volsmpl", "--frames", "2", "--checkpoint", str(ckpt),
+    rc = main(["egohmr", "sample", "--model", "none,volsmpl", "--frames", "2", "--checkpoint", str(ckpt),
                "--out", str(out), "--render", "1", "--batch", "2", "--budget-mb", "64"])
     assert rc == 0
     res = json.loads((out / "results.json").read_text())
@@ -86,8 +86,8 @@ def test_cli_sample_writes_results_and_figures(tmp_path, tiny_ckpt):
 
 def test_bad_input_gets_one_line(tmp_path, capsys, tiny_ckpt):
     ckpt, _ = tiny_ckpt
-    assert main(["egohmr", "sample", "--guide", "volsmpl,foo", "--out", str(tmp_path / "o")]) == 2
-    assert "unknown guide" in capsys.readouterr().err
+    assert main(["egohmr", "sample", "--model", "volsmpl,foo", "--out", str(tmp_path / "o")]) == 2
+    assert "unknown model(s) ['foo']" in capsys.readouterr().err
     assert main(["egohmr", "sample", "--checkpoint", str(tmp_path / "none"), "--out", str(tmp_path / "o")]) == 2
     assert "no egohmr checkpoint" in capsys.readouterr().err
     coap = str(volsmpl.volume.models.model_kind("coap").default_checkpoint)
@@ -95,7 +95,7 @@ def test_bad_input_gets_one_line(tmp_path, capsys, tiny_ckpt):
     assert "not an egohmr checkpoint" in capsys.readouterr().err
     assert main(["egohmr", "sample", "--scale", "volsmpl=abc", "--checkpoint", str(ckpt), "--out", str(tmp_path / "o")]) == 2
     assert "not a number" in capsys.readouterr().err
-    assert main(["egohmr", "sample", "--guide", "none,mesh", "--encoder-bf16", "--out", str(tmp_path / "o")]) == 2
+    assert main(["egohmr", "sample", "--model", "none,mesh", "--encoder-bf16", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
     assert "has none: add volsmpl or coap" in err and "\n" not in err
     assert main(["egohmr", "train", "--encoder-bf16", "--out", str(tmp_path / "o")]) == 2
@@ -110,10 +110,10 @@ def test_encoder_bf16_reaches_the_learned_guides_encoders(tmp_path, tiny_ckpt, e
     for flag in ([], ["--encoder-bf16"]):
         seen.clear()
         out = tmp_path / f"out{len(flag)}"
-        assert main(["egohmr", "sample", "--guide", "volsmpl,coap", "--frames", "1", "--checkpoint", str(ckpt),
+        assert main(["egohmr", "sample", "--model", "volsmpl,coap", "--frames", "1", "--checkpoint", str(ckpt),
                      "--out", str(out), "--render", "0", "--batch", "1", "--no-max-batch"] + flag) == 0
         assert seen and all(b == bool(flag) for b in seen)
-        assert json.loads((out / "results.json").read_text())["encoder_bf16"] is bool(flag)
+        assert json.loads((out / "results.json").read_text())["config"]["encoder_bf16"] is bool(flag)
 
 
 def test_user_frame_of_another_resolution_is_refused(tmp_path):
@@ -177,7 +177,7 @@ def test_user_frame_and_scan_run_end_to_end(tmp_path, frames, tiny_ckpt):
     assert np.allclose(camera_points(uf, to_y_up(z_up, "z")), np.asarray(cam_mesh.vertices), atol=1e-6)
     out = tmp_path / "out"
     rc = main(["egohmr", "sample", "--frame", str(tmp_path / "frame.json"), "--scene", str(tmp_path / "room.ply"),
-               "--units", "mm", "--guide", "none,volsmpl", "--checkpoint", str(ckpt), "--out", str(out)])
+               "--units", "mm", "--model", "none,volsmpl", "--checkpoint", str(ckpt), "--out", str(out)])
     assert rc == 0
     res = json.loads((out / "results.json").read_text())
     assert set(res["summary"]) == {"none", "volsmpl"} and (out / "frame_frame.png").is_file()
