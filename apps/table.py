@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ["add_common", "check_common", "check_threads", "parse_kinds", "checkpoints", "volumes",
-           "checkpoint_names", "CaseRecords", "envelope", "write_results"]
+           "checkpoint_names", "CaseRecords", "envelope", "case_records", "write_results"]
 
 
 
@@ -203,6 +203,14 @@ def envelope(app: str, config: dict, summary: dict, paper, cases: dict, meta: di
         raise TypeError(f"cases must map each kind to its records, got {type(cases).__name__}")
     return {"app": app, "config": config, "summary": summary, "paper": paper, "cases": cases,
             "figures": figures or {}, "meta": meta, **extra}
+
+
+def case_records(cases) -> list:
+    """A result's per-case records as one list: the envelope's {kind: [records]} in kind order, or a list as it is
+    (the layout of motion tables made before the envelope)."""
+    if isinstance(cases, dict):
+        return [r for recs in cases.values() for r in recs]
+    return list(cases or [])
 
 
 def write_results(out, result: dict, name: str = "results.json") -> Path:

@@ -31,7 +31,7 @@ SNAP=/tmp/snap_motion
 OUT=out/motion_tuned
 EXPECTED=440   # 15 rooms x 8 pairs for VolumetricSMPL and mesh, COAP's sweep on 5 tuning rooms and its choice on 10
 TABLE=(--protocol tuned --scenes all --sequences 8 --frames 80 --iters 100 --threads 1)
-CHECK=(--protocol paper --scenes 2 --sequences 2 --w coap=0.1 --frames 80 --iters 1 --threads 1 --render 0)
+CHECK=(--scenes 2 --sequences 2 --w coap=0.1 --frames 80 --iters 1 --threads 1 --render 0)
 
 [ -d "$SNAP/volsmpl" ] || tools/export_snapshot.sh "$SNAP" fea400e
 mkdir -p "$OUT/cases"

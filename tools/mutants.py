@@ -172,6 +172,9 @@ MUTANTS = {
     # report: a result's producer
     "report_producer_app_only": ("core/report/build.py", "return producer_closure(section.producer + _BODY_DATA, git.root)",
                                  "return section.producer", [T + "report/test_build.py::test_stale_when_core_code_the_app_imports_changed"]),
+    "check_labels_keep_the_kind_key": ("core/report/result_check.py", "walk(v, case, path if grouped else path + (str(k),))",
+                                       "walk(v, case, path + (str(k),))",
+                                       [T + "report/test_result_check.py::test_records_grouped_by_the_kind_they_name_compare_with_the_same_records_listed_flat"]),
     # runtime: the resource meter
     "meter_peak_from_missing_rss": ("core/runtime/meter.py", "            elif rss_bytes() < 0:", "            elif False:",
                                     [T + "runtime/test_meter.py::test_cpu_meter_without_proc_reports_the_rise_of_ru_maxrss"]),
@@ -181,6 +184,11 @@ MUTANTS = {
     # cli: device checks
     "device_unchecked": ("core/cli.py", "            check_device(args.device)\n", "", [T + "test_cuda_paths.py::test_device_cuda_without_cuda_is_one_line",
                                                                                    T + "test_cuda_paths.py::test_check_device_names"]),
+    # apps: the shared options and case records
+    "threads_zero_accepted": ("apps/table.py", "    if threads < 1:", "    if threads < 0:",
+                              [T + "apps/selfpen/test_app.py::test_cli_case_and_checkpoint_mistakes_stop_before_any_work"]),
+    "case_records_ignore_the_settings": ("apps/table.py", "        key = self.key(spec, volume)", "        key = self.key({}, volume)",
+                                         [T + "apps/selfpen/test_app.py::test_cli_resume_reuses_finished_repairs_and_refits_changed_settings"]),
     # apps/motion: the table's paired differences
     "paired_by_list_order": ("apps/motion/stats.py", "common = sorted(set(seqs[a]) & set(seqs[b]))",
                              "common = list(seqs[a])[:min(len(seqs[a]), len(seqs[b]))]; seqs = {a: dict(zip(common, "

@@ -2,6 +2,7 @@
 
     volsmpl motion --model volsmpl,coap,mesh --scenes 2 --sequences 2 --out out/motion
     volsmpl motion --model volsmpl --scenes all              # 15 rooms x 8 pairs, as the paper
+    volsmpl motion tune --model volsmpl,coap,mesh --scenes all --out out/motion   # weights tuned, then tested
     volsmpl motion --scene room.ply --up z --units mm --start 1.2,0.4 --goal 3.1,2.0 --model volsmpl
 
 Per model (and per collision weight: COAP's sweep w in {0.01, 0.1, 1}, Table D.1) every start/goal pair is walked
@@ -13,20 +14,24 @@ COAP setting; --coll-frames forces 'all' or a number).
 
 With two rooms or more, every third room tunes the weights and the others test (tuning.py): summary.<model>_test
 is each model over the test rooms at the weight that scored best on the tuning rooms (results.json's `tuning`).
+`volsmpl motion tune` sweeps the weights on the tuning rooms only and runs each model's best weight on the test
+rooms (a third of the sweep's cost; its rows <model> are the test rooms').
 
-Writes OUT/results.json (summary.<model>, <model>_w<w> and <model>_test, the paper's rows, per-sequence records, meta,
-and `paired`: the compared rows' per-sequence differences with bootstrap intervals, stats.py),
+Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<model>, <model>_w<w> and <model>_test, the
+paper's rows, per-sequence records per kind, figures, meta; then `tuning`, `cost` and `paired`: the compared rows' per-sequence differences with bootstrap intervals, stats.py),
 OUT/topdown_<scene>.png and OUT/strip_<scene>_<k>_<model>.png for the first --render sequences.
 """
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 import torch
+
+from volsmpl.apps.table import add_common
 
 from .stats import compared_runs, format_pairs, paired_differences
 from .summary import cost_columns, fit_budget, format_table, paper_summary, tuned_rows, tuned_summary, wkey
@@ -42,7 +47,13 @@ def add_parser(sub):
                        description="Walk from start to goal through furnished rooms (or your own scan) by "
                                    "optimising a differentiable walking model against a goal, a scene collision and "
                                    "a jerk term; report per-frame cost, total memory, collisions and goal distance.")
-    p.add_argument("--model", default="volsmpl,coap,mesh", help="comma-separated kinds: volsmpl, coap, mesh")
+    p.add_argument("action", nargs="?", default="run", choices=("run", "tune"),
+                   help="run (default): every weight on every room (Tables 5 and D.1; rows <model>_test add the "
+                        "tuning split's view); tune: the weights swept on every third room only, each model's best "
+                        "weight run on the other rooms (the compared rows), a third of the sweep's cost")
+    add_common(p, out="out/motion", render=1, seed="the first generated room's seed",
+               resume="reuse the sequences OUT/cases/ already holds from an identical run (same code, weights, "
+                      "settings and inputs); the others are computed")
     p.add_argument("--scenes", default="2", help="'all' (15 generated rooms) or a number of rooms")
     p.add_argument("--sequences", type=int, default=8, help="start/goal pairs per room (default 8)")
     p.add_argument("--scene", default=None, help="your own scene: a mesh or point cloud file (instead of rooms)")
@@ -76,23 +87,9 @@ def add_parser(sub):
                    help="run the learned kinds' part encoder (the PointNet, most of the collision term's cost) under "
                         "bfloat16 autocast, both kinds alike: ~1.7x faster per frame on a CPU with AVX512-BF16 or AMX "
                         "(emulated, not timed, on one without), codes rounded (README, apps/motion); default float32")
-    p.add_argument("--protocol", default="paper", choices=["paper", "tuned"],
-                   help="'paper' (default): every weight on every room (Tables 5 and D.1; rows <model>_test add the "
-                        "tuning split's view); 'tuned': the weights swept on every third room only, each model's "
-                        "best weight run on the other rooms (the compared rows), a third of the sweep's cost")
-    p.add_argument("--render", type=int, default=1, help="frame strips of the first N sequences per scene (0: none)")
-    p.add_argument("--out", default="out/motion", help="output folder")
-    p.add_argument("--checkpoint-volsmpl", default=None, help="trained VolumetricSMPL checkpoint (default: the shipped one)")
-    p.add_argument("--checkpoint-coap", default=None, help="trained COAP checkpoint (default: the shipped one)")
     p.add_argument("--batch", type=int, default=1,
                    help="optimise up to N start/goal pairs of a room together (one harness run; each walk its own "
                         "objective): fills a GPU; 1 (default) keeps the per-sequence time and memory columns")
-    p.add_argument("--resume", action="store_true",
-                   help="reuse the sequences OUT/cases/ already holds from an identical run (same code, weights, "
-                        "settings and inputs); the others are computed")
-    p.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads")
-    p.add_argument("--seed", type=int, default=0, help="first room seed")
     return p
 
 
@@ -135,27 +132,24 @@ def _print_case(scene: str, k: int, label: str, met: dict, reused: bool = False)
 
 def run(args) -> int:
     import volsmpl
-    from volsmpl.report import paper
+    from volsmpl.apps.table import check_common, checkpoint_names, envelope, volumes, write_results
     from volsmpl.io.case_store import CaseStore, job_key
-    from volsmpl.volume.models import model_kind, parse_models
-    from volsmpl.io.outputs import check_writable, write_atomic
     from volsmpl.io.provenance import machine_info
+    from volsmpl.report import paper
+    from volsmpl.volume.models import model_kind
 
     from volsmpl.apps.motion import walk as W
     from .figures import topdown
     from .scenes import check_endpoint, check_pair, floor_xz, load_scene, room_scenes
     from .synth import SynthConfig, check_frames, measure_cost, published_penetration, synthesize_batch
 
-    out = check_writable(args.out, "dir", "--out")
-    models = parse_models(args.model)
+    models, ckpts = check_common(args)
+    out = Path(args.out)
+    protocol = "tuned" if args.action == "tune" else "paper"
     weights = parse_weights(args.w, models)
     frames = check_frames(args.frames)
     if args.iters < 0:
         raise ValueError(f"--iters must be >= 0, got {args.iters}")
-    ckpts = {m: c for m, c in (("volsmpl", args.checkpoint_volsmpl), ("coap", args.checkpoint_coap)) if c}
-    for m in ckpts:
-        if m not in models:
-            raise ValueError(f"--checkpoint-{m} given but {m} is not in --model; add it or drop the checkpoint")
     if args.batch < 1:
         raise ValueError(f"--batch must be >= 1, got {args.batch}")
     if args.sequences < 1:
@@ -165,19 +159,15 @@ def run(args) -> int:
     cf = str(args.coll_frames).strip().lower()
     if cf not in ("auto", "all") and not (cf.isdigit() and int(cf) >= 1):
         raise ValueError(f"--coll-frames must be 'auto', 'all' or a number >= 1, got {args.coll_frames!r}")
-    if args.protocol == "tuned" and (args.scene is not None or str(args.scenes).strip().lower() != "all"
-                                     and int(args.scenes) < 2):
-        raise ValueError("--protocol tuned splits generated rooms into tuning and test rooms: use --scenes 2 or more "
+    if protocol == "tuned" and (args.scene is not None or str(args.scenes).strip().lower() != "all"
+                                and int(args.scenes) < 2):
+        raise ValueError("tune splits generated rooms into tuning and test rooms: use --scenes 2 or more "
                          "(not --scene)")
     if args.encoder_bf16 and not any(model_kind(m).learned for m in models):
         raise ValueError(f"--encoder-bf16 sets the learned kinds' encoder arithmetic, but --model {','.join(models)} "
                          f"runs none: add volsmpl or coap, or drop the flag")
     if args.published_cost and "coap" not in models:
         raise ValueError("--published-cost measures COAP as published: add coap to --model")
-    if args.device == "cuda" and not torch.cuda.is_available():
-        raise RuntimeError("--device cuda but torch sees no CUDA GPU; use --device cpu")
-    if args.threads:
-        torch.set_num_threads(args.threads)
 
     if args.scene is not None:
         sc = load_scene(args.scene, up=args.up, units=args.units, floor_y=args.floor_y)
@@ -197,10 +187,7 @@ def run(args) -> int:
 
     body = volsmpl.create_body().to(args.device)
     model = W.WalkModel(body)
-    volumes = {m: volsmpl.attach_volume(body, ckpts.get(m), model=m).to(args.device) for m in models}
-    for m in models:
-        if model_kind(m).learned:
-            volumes[m].net.encoder_bf16 = args.encoder_bf16   # in each encoding's cache key and each record's job key
+    vols = volumes(body, models, ckpts, args.device, encoder_bf16=args.encoder_bf16)  # bf16: in every key
     budget = args.mem_budget_gb * 2 ** 30
     sc0 = scenes[0]
     s0, g0 = sc0.pairs[0]
@@ -211,7 +198,7 @@ def run(args) -> int:
                       heading0=init["heading0"])
     costs, coll_frames = {}, {}
     for m in models:   # the per-frame cost on the full cloud, on the straight walk of the first pair
-        costs[m] = measure_cost(volumes[m], probe, sc0.points, frames=args.cost_frames, repeats=args.cost_repeats,
+        costs[m] = measure_cost(vols[m], probe, sc0.points, frames=args.cost_frames, repeats=args.cost_repeats,
                                 device=args.device)
         line = fit_budget(costs[m], budget)
         fits = costs[m]["max_frames_in_budget"] is None or costs[m]["max_frames_in_budget"] >= frames
@@ -226,7 +213,7 @@ def run(args) -> int:
         del pub
 
     records = {(m, w): [] for m in models for w in weights[m]}
-    cases = []
+    cases, figures = {}, {}
     store = CaseStore(out / "cases", resume=args.resume)
 
     def run_scene(sc, plan) -> None:
@@ -245,7 +232,7 @@ def run(args) -> int:
                                      "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(),
                                      "batch": args.batch, "body": body.fingerprint, "encoder_bf16": args.encoder_bf16,
                                      "threads": torch.get_num_threads()},
-                                    modules=[volumes[m]], packages=["volsmpl.apps.motion"]))
+                                    modules=[vols[m]], packages=["volsmpl.apps.motion"]))
                 rec = store.get(names[k], keys[k])
                 if rec is not None:
                     recs[k] = rec
@@ -254,23 +241,25 @@ def run(args) -> int:
             todo = [k for k in range(len(sc.pairs)) if k not in recs]
             for i in range(0, len(todo), args.batch):   # the pairs not stored yet, up to --batch at a time
                 ks = todo[i:i + args.batch]
-                for k, r in zip(ks, synthesize_batch(model, volumes[m], sc, [sc.pairs[k] for k in ks], w, cfg)):
+                for k, r in zip(ks, synthesize_batch(model, vols[m], sc, [sc.pairs[k] for k in ks], w, cfg)):
                     s, g = sc.pairs[k]
                     recs[k] = {"scene": sc.name, "sequence": k, "model": m, "w": w, "start": np.asarray(s).tolist(),
                                "goal": np.asarray(g).tolist(), "frames": frames, "collision_frames": coll_frames[m],
                                "metrics": r["metrics"]}
                     if k < args.render:
                         W.render_strip(r["walk"], body.faces, out / f"strip_{names[k]}.png", every=10)
+                        figures[f"strip_{names[k]}"] = f"strip_{names[k]}.png"
                     store.put(names[k], keys[k], recs[k])
                     _print_case(sc.name, k, label, recs[k]["metrics"])
             for k in range(len(sc.pairs)):
                 paths.setdefault(label, []).append(np.asarray(recs[k]["metrics"]["pelvis_xz"]))
                 records[(m, w)].append(recs[k])
-                cases.append(recs[k])
+                cases.setdefault(m, []).append(recs[k])
         topdown(sc, paths, sc.pairs, path=out / f"topdown_{sc.name}.png")
+        figures[f"topdown_{sc.name}"] = f"topdown_{sc.name}.png"
 
     every = [(m, w) for m in models for w in weights[m]]
-    if args.protocol == "tuned":   # the sweep on the tuning rooms, then each model's chosen weight on the others
+    if protocol == "tuned":   # the sweep on the tuning rooms, then each model's chosen weight on the others
         tune, test = split_scenes([sc.name for sc in scenes])
         for sc in scenes:
             if sc.name in tune:
@@ -291,29 +280,26 @@ def run(args) -> int:
     print()
     print(format_table(summary))
     if tuning:
-        rows = "rows <model>" if args.protocol == "tuned" else "rows *_test"
+        rows = "rows <model>" if protocol == "tuned" else "rows *_test"
         print(f"{rows}: rooms {', '.join(tuning['test_scenes'])} only, each model at the weight best on rooms "
               f"{', '.join(tuning['tune_scenes'])} ({', '.join(f'{m} w={w:g}' for m, w in tuning['choice'].items())}); "
               f"criterion: {tuning['criterion']}")
     print("per-frame cost: the collision term on the full cloud (" + ", ".join(sorted({c["memory_kind"] for c in costs.values()}))
           + "); total: peak of one whole-sequence optimisation; collision: exact mesh test, every scene point")
-    result = {
-        "config": {"models": models, "weights": weights, "frames": frames, "iters": args.iters, "lr": args.lr,
-                   "scenes": [sc.name for sc in scenes], "sequences": args.sequences if args.scene is None else 1,
-                   "coll_frames": coll_frames, "mem_budget_gb": args.mem_budget_gb, "residuals": args.residuals,
-                   "floor_in_loss": args.floor_in_loss, "user_scene": args.scene, "device": args.device,
-                   "checkpoints": {m: ckpts.get(m, "shipped") for m in models if m != "mesh"}, "batch": args.batch,
-                   "protocol": args.protocol, "encoder_bf16": args.encoder_bf16,
-                   "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
-                                "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"},
-        "summary": summary, "tuning": tuning, "cost": costs,
-        "paper": {**paper.rows("motion"), **paper.rows("coll_weights")},
-        "cases": cases, "meta": machine_info(args.device),
-    }
+    config = {"models": models, "weights": weights, "frames": frames, "iters": args.iters, "lr": args.lr,
+              "scenes": [sc.name for sc in scenes], "sequences": args.sequences if args.scene is None else 1,
+              "coll_frames": coll_frames, "mem_budget_gb": args.mem_budget_gb, "residuals": args.residuals,
+              "floor_in_loss": args.floor_in_loss, "user_scene": args.scene, "device": args.device,
+              "checkpoints": checkpoint_names(models, ckpts), "batch": args.batch, "protocol": protocol,
+              "encoder_bf16": args.encoder_bf16, "seed": args.seed, "threads": torch.get_num_threads(),
+              "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
+                           "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"}
+    result = envelope("motion", config, summary, {**paper.rows("motion"), **paper.rows("coll_weights")}, cases,
+                      machine_info(args.device), figures, tuning=tuning, cost=costs)
     runs = compared_runs(result)
     if len(runs) >= 2 and min(len(r) for r in runs.values()) >= 2:   # paired differences need 2+ shared sequences
         result["paired"] = paired_differences(runs)
         print(format_pairs(result["paired"]))
-    write_atomic(out / "results.json", json.dumps(result, indent=1))
+    write_results(out, result)
     print(f"wrote {out / 'results.json'}")
     return 0

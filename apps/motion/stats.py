@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from volsmpl.apps.table import case_records
 from volsmpl.io.outputs import write_atomic
 from volsmpl.io.provenance import machine_info
 
@@ -81,10 +82,10 @@ def paired_differences(runs: dict, metrics=METRICS, confidence: float = 0.95, n_
 
 
 def compared_runs(result: dict) -> dict:
-    """The rows a motion results.json compares, as label -> sequence records: under --protocol tuned (or with a
+    """The rows a motion results.json compares, as label -> sequence records: under `volsmpl motion tune` (or with a
     tuning split) each model at its chosen weight on the test rooms; else Table 5's rows (COAP at w = 0.1, or its
     first weight) on every room."""
-    cases = result.get("cases") if isinstance(result, dict) else None
+    cases = case_records(result.get("cases")) if isinstance(result, dict) else None
     if not cases or not all(isinstance(c, dict) and {"model", "w", "scene", "sequence", "metrics"} <= set(c)
                             for c in cases):
         raise ValueError("no per-sequence records ('cases' with model, w, scene, sequence, metrics): "

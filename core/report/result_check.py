@@ -51,7 +51,8 @@ def _label(i: int, rec) -> str:
 
 def case_leaves(cases) -> dict:
     """The records of a result's `cases` as {(case label, value path): value}: lists of records are keyed by their
-    identifying fields, nested dicts by their keys; ignored (run-measuring) fields are left out.
+    identifying fields, nested dicts by their keys (but a kind's key over records that name that kind in their
+    'model' field); ignored (run-measuring) fields are left out.
 
     Shape: cases (dict or list, any nesting) -> {(str, str): number | str | bool | None}."""
     out: dict = {}
@@ -59,8 +60,12 @@ def case_leaves(cases) -> dict:
     def walk(obj, case: str, path: tuple):
         if isinstance(obj, dict):
             for k, v in obj.items():
-                if not IGNORED.search(str(k)):
-                    walk(v, case, path + (str(k),))
+                if IGNORED.search(str(k)):
+                    continue
+                # records grouped under the kind they name themselves ({"coap": [{"model": "coap", ...}]}) are
+                # labelled by their own fields alone: the same records grouped or listed flat compare as one
+                grouped = isinstance(v, list) and v and all(isinstance(x, dict) and x.get("model") == k for x in v)
+                walk(v, case, path if grouped else path + (str(k),))
         elif isinstance(obj, list) and obj and all(isinstance(x, dict) for x in obj):
             for i, rec in enumerate(obj):   # a record: its identifying fields name it, they are not values
                 label = _label(i, rec)

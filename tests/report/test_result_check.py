@@ -36,8 +36,8 @@ def fresh_of(*names, **change):
 
 def test_leaves_are_keyed_by_the_records_identity_and_skip_run_measures():
     leaves = case_leaves(STORED["cases"])
-    assert leaves[("volsmpl/model=volsmpl|name=b", "after/collision_pct")] == 3.0
-    assert leaves[("mesh/model=mesh|name=a", "loss/1")] == 0.5
+    assert leaves[("model=volsmpl|name=b", "after/collision_pct")] == 3.0
+    assert leaves[("model=mesh|name=a", "loss/1")] == 0.5
     assert not any("ms_per_iter" in p or "peak_mem" in p for _, p in leaves)
     motion = [{"scene": "room0", "sequence": 1, "model": "coap", "w": 0.1, "metrics": {"goal_dist_m": 0.01,
                                                                                        "optim_s": 100.0}}]
@@ -49,7 +49,7 @@ def test_compare_agrees_on_same_values_other_timings_and_names_a_difference():
     assert c["agree"] and c["cases_compared"] == 2 and c["cases_total"] == 4 and c["values_compared"] == 10
     c = compare_results(STORED, fresh_of("a", "b", **{"volsmpl/a": 1.0 + 1e-4}))
     assert not c["agree"] and c["n_mismatches"] == 1 and c["mismatches"][0]["value"] == "after/collision_pct"
-    assert c["mismatches"][0]["case"] == "volsmpl/model=volsmpl|name=a"
+    assert c["mismatches"][0]["case"] == "model=volsmpl|name=a"
     assert abs(c["max_abs_diff"] - 1e-4) < 1e-9
     assert compare_results(STORED, fresh_of("a", **{"volsmpl/a": 1.0 + 1e-4}), rel_tol=1e-3)["agree"]
     with pytest.raises(ValueError, match="shares no case"):
@@ -96,7 +96,7 @@ def test_report_takes_an_agreeing_check_at_or_after_the_change_and_nothing_else(
     write_check(stored, write(root / "out" / "bad.json", dict(fresh_of("a", **{"mesh/a": 9.0}),
                                                               meta={"git_commit": later})))
     verdict, line = _verdict(root, stored)
-    assert verdict == "stale" and "disagrees on 1 values" in line and "mesh/model=mesh|name=a" in line
+    assert verdict == "stale" and "disagrees on 1 values" in line and "model=mesh|name=a" in line
     # a check of another version of the result file is ignored
     write_check(stored, fresh)
     stored.write_text(json.dumps(dict(STORED, meta={"git_commit": made}, note="edited")))
@@ -158,3 +158,20 @@ def test_chained_check_ties_new_code_to_the_table_through_code_checked_on_its_ma
     assert rc == 2 and "needs --verify hoi=" in io.err
     rc, io = cli("--verify", f"hoi={run('fresh2', later, m2, **{'mesh/a': 8.0})}", "--baseline", f"hoi={base}")
     assert rc == 0 and "1 differ" in io.out and _verdict(root, stored)[0] == "stale"
+
+
+def test_records_grouped_by_the_kind_they_name_compare_with_the_same_records_listed_flat():
+    """The apps' envelope groups records per kind ({"coap": [...]}); a motion table made before it lists them flat.
+    Records that name their kind in 'model' are labelled by their own fields either way, so a check compares them."""
+    from volsmpl.report.result_check import case_leaves, compare_results
+
+    a = {"model": "coap", "w": 0.1, "scene": "room0", "sequence": 1, "metrics": {"goal_dist_m": 0.25}}
+    b = {"model": "mesh", "w": 1.0, "scene": "room0", "sequence": 1, "metrics": {"goal_dist_m": 0.5}}
+    assert case_leaves({"coap": [a], "mesh": [b]}) == {
+        ("model=coap|w=0.1|scene=room0|sequence=1", "metrics/goal_dist_m"): 0.25,
+        ("model=mesh|w=1.0|scene=room0|sequence=1", "metrics/goal_dist_m"): 0.5}
+    assert case_leaves([a, b]) == case_leaves({"coap": [a], "mesh": [b]})
+    check = compare_results({"cases": [a, b]}, {"cases": {"coap": [dict(a, metrics={"goal_dist_m": 0.3})]}})
+    assert check["cases_compared"] == 1 and check["n_mismatches"] == 1
+    # records that do not name the key they are grouped under keep it in their label
+    assert case_leaves({"volsmpl": [{"name": "sit", "v": 1}]}) == {("volsmpl/name=sit", "v"): 1}

@@ -10,6 +10,7 @@ import torch
 
 import volsmpl
 from volsmpl.apps.motion import objective as O
+from volsmpl.apps.table import case_records
 from volsmpl.apps.motion import scenes as S
 from volsmpl.apps.motion import walk as W
 from volsmpl.geometry.point_mesh_distance import mesh_signed_distance
@@ -247,7 +248,7 @@ def test_cli_errors_are_one_line(tmp_path, capsys):
              (["--w", "mesh=x"], "weights must be numbers"),
              (["--published-cost"], "add coap to --model"),
              (["--batch", "0"], "--batch must be >= 1"),
-             (["--checkpoint-coap", "x"], "coap is not in --model"),
+             (["--checkpoint-coap", "x"], "--model mesh does not run coap"),
              (["--encoder-bf16"], "runs none: add volsmpl or coap")]
     for extra, msg in cases:
         assert main(["motion", "--model", "mesh", "--out", out] + extra) == 2
@@ -294,7 +295,7 @@ def test_end_to_end_every_model(tmp_path):
             assert s[k] is not None, (key, k)
         assert s["n_sequences"] == 1 and np.isfinite(s["goal_dist_m"])
     assert d["paper"]["volsmpl"]["frame_ms"] == 3.78 and "coap_w0.01" in d["paper"]
-    assert len(d["cases"]) == 3 and "meta" in d
+    assert len(case_records(d["cases"])) == 3 and "meta" in d
     assert (out / f"topdown_{d['config']['scenes'][0]}.png").exists()
     assert len(list(out.glob("strip_*.png"))) == 3
     # a second run with --resume reuses the three sequences (same code, weights, settings, inputs) ...
@@ -305,7 +306,7 @@ def test_end_to_end_every_model(tmp_path):
                "--out", str(out), "--resume"])
     assert rc == 0 and {p.name: p.read_text() for p in (out / "cases").glob("*.json")} == cases
     again = json.loads((out / "results.json").read_text())
-    assert [c["metrics"]["goal_dist_m"] for c in again["cases"]] == [c["metrics"]["goal_dist_m"] for c in d["cases"]]
+    assert [c["metrics"]["goal_dist_m"] for c in case_records(again["cases"])] == [c["metrics"]["goal_dist_m"] for c in case_records(d["cases"])]
     # ... and recomputes one whose settings differ (3 iterations: a new key, the record is replaced)
     rc = main(["motion", "--model", "volsmpl", "--scenes", "1", "--sequences", "1", "--frames", "10", "--iters", "3",
                "--cost-frames", "1", "--cost-repeats", "1", "--render", "0", "--out", str(out), "--resume"])
@@ -317,14 +318,14 @@ def test_end_to_end_every_model(tmp_path):
 def test_tuned_protocol_runs_the_sweep_on_tuning_rooms_only(tmp_path, capsys):
     from volsmpl.cli import main
     out = tmp_path / "motion"
-    rc = main(["motion", "--model", "volsmpl,coap", "--w", "coap=0.1,1", "--scenes", "3", "--sequences", "1",
+    rc = main(["motion", "tune", "--model", "volsmpl,coap", "--w", "coap=0.1,1", "--scenes", "3", "--sequences", "1",
                "--frames", "10", "--iters", "2", "--cost-frames", "1", "--cost-repeats", "1", "--render", "0",
-               "--protocol", "tuned", "--out", str(out)])
+               "--out", str(out)])
     assert rc == 0
     d = json.loads((out / "results.json").read_text())
     tune, test = d["tuning"]["tune_scenes"], d["tuning"]["test_scenes"]
     assert len(tune) == 1 and len(test) == 2 and d["config"]["protocol"] == "tuned"
-    by_room = {r: sorted((c["model"], c["w"]) for c in d["cases"] if c["scene"] == r) for r in tune + test}
+    by_room = {r: sorted((c["model"], c["w"]) for c in case_records(d["cases"]) if c["scene"] == r) for r in tune + test}
     chosen = d["tuning"]["choice"]["coap"]
     assert by_room[tune[0]] == [("coap", 0.1), ("coap", 1.0), ("volsmpl", 1.0)]
     assert by_room[test[0]] == by_room[test[1]] == sorted([("coap", chosen), ("volsmpl", 1.0)])
@@ -332,12 +333,12 @@ def test_tuned_protocol_runs_the_sweep_on_tuning_rooms_only(tmp_path, capsys):
     assert d["summary"]["coap_w0.1"]["split"] == "tune"
     # the compared rows' paired differences: the test rooms' two sequences, COAP at its chosen weight
     (pair,) = d["paired"]["pairs"]
-    coll = {(c["model"], c["scene"]): c["metrics"]["collision_cm"] for c in d["cases"] if c["scene"] in test
+    coll = {(c["model"], c["scene"]): c["metrics"]["collision_cm"] for c in case_records(d["cases"]) if c["scene"] in test
             and c["w"] in (1.0 if c["model"] == "volsmpl" else chosen,)}
     assert pair["n"] == 2 and pair["b"] == f"coap (w {chosen:g})"
     assert pair["metrics"]["collision_cm"]["mean_diff"] == pytest.approx(
         np.mean([coll[("volsmpl", r)] - coll[("coap", r)] for r in test]))
-    assert main(["motion", "--model", "volsmpl", "--scenes", "1", "--protocol", "tuned", "--out", str(out)]) == 2
+    assert main(["motion", "tune", "--model", "volsmpl", "--scenes", "1", "--out", str(out)]) == 2
     assert "--scenes 2 or more" in capsys.readouterr().err
 
 
