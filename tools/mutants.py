@@ -172,6 +172,8 @@ MUTANTS = {
     # report: a result's producer
     "report_producer_app_only": ("core/report/build.py", "return producer_closure(section.producer + _BODY_DATA, git.root)",
                                  "return section.producer", [T + "report/test_build.py::test_stale_when_core_code_the_app_imports_changed"]),
+    "report_tables_unbounded": ("core/report/sections.py", "    more = extra[max(0, MAX_COLUMNS - 1 - len(cols)):]",
+                                "    more = []", [T + "report/test_build.py::test_wide_summaries_keep_the_paper_columns_first_and_tables_at_most_ten_columns"]),
     "check_labels_keep_the_kind_key": ("core/report/result_check.py", "walk(v, case, path if grouped else path + (str(k),))",
                                        "walk(v, case, path + (str(k),))",
                                        [T + "report/test_result_check.py::test_records_grouped_by_the_kind_they_name_compare_with_the_same_records_listed_flat"]),

@@ -98,9 +98,12 @@ SECTIONS: dict[str, Section] = {
                                        "for S in 0 1 2 3; do volsmpl selfpen --model volsmpl,coap --sampler-seed $S "
                                        "--out out/selfpen_s$S; done; python tools/selfpen_seeds.py")},
                     ("docs/selfpen/hands_through_thighs.png", "docs/selfpen/arm_through_head.png"), tune=True),
-    "hoi": _app("hoi", ("3",), "Human-object reconstruction"),
-    "egohmr": _app("egohmr", ("4",), "Human mesh recovery in 3D scenes (EgoHMR)"),
+    "hoi": _app("hoi", ("3",), "Human-object reconstruction", command="volsmpl hoi --model volsmpl,coap,mesh --split test "
+                                                                      "--out out/hoi"),
+    "egohmr": _app("egohmr", ("4",), "Human mesh recovery in 3D scenes (EgoHMR)",
+                   command="volsmpl egohmr sample --split test --tuned docs/egohmr/tune.json --out out/egohmr"),
     "motion": _app("motion", ("5", "D.1"), "Scene-constrained motion synthesis", rs.motion_section,
+                   "volsmpl motion tune --model volsmpl,coap,mesh --scenes all --published-cost --out out/motion",
                    more={"motion_paired": ("docs/motion/paired.json", "python -m volsmpl.apps.motion.stats "
                                            "docs/motion/results.json --out docs/motion/paired.json")}),
 }

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from volsmpl.report import paper as paper_tables
 MIB = 2.0 ** 20
+#: the widest table the report writes (columns, the row label included); further measures go to a second table
+MAX_COLUMNS = 10
 
 
 def fmt(v) -> str:
@@ -70,8 +72,9 @@ def summary_table(tid: str, groups: list[tuple[str, str, dict]], key_map: dict |
 
     groups: (row label, back-end key, {metric: value}); the paper's row of the same back-end key follows each
     group's first row. key_map: paper column -> our metric key where they differ. extra: more of our metric keys
-    as columns (default: every numeric key of the summaries that no paper column reads). paper_rows: the paper rows
-    to print (default: every row; the ones matching no group go last)."""
+    as columns (default: every numeric key of the summaries that no paper column reads); those beyond MAX_COLUMNS
+    columns go to a second table of our rows. paper_rows: the paper rows to print (default: every row; the ones
+    matching no group go last)."""
     t = paper_tables.TABLES[tid]
     key_map = key_map or {}
     cols = list(t["columns"])
@@ -80,6 +83,9 @@ def summary_table(tid: str, groups: list[tuple[str, str, dict]], key_map: dict |
         extra = []
         for _, _, s in groups:
             extra += [k for k, v in s.items() if _is_num(v) and k not in read and k not in extra]
+    # the paper's columns first; our further measures fill the table up to MAX_COLUMNS, the rest go to a second one
+    more = extra[max(0, MAX_COLUMNS - 1 - len(cols)):]
+    extra = extra[:len(extra) - len(more)]
     header = ["row"] + [f"{t['columns'][c]['label']} [{t['columns'][c]['unit']}]".replace(" []", "") for c in cols]
     header += extra
     notes = t.get("notes", {})
@@ -99,6 +105,10 @@ def summary_table(tid: str, groups: list[tuple[str, str, dict]], key_map: dict |
         if key not in done:
             paper_row(key)
     out = [paper_caption(tid), ""] + md_table(header, rows)
+    for i in range(0, len(more), MAX_COLUMNS - 1):
+        part = more[i:i + MAX_COLUMNS - 1]
+        out += ["", "Our further measures:" if i == 0 else "And:", ""]
+        out += md_table(["row"] + part, [[f"ours: {label}"] + [fmt(s.get(k)) for k in part] for label, _, s in groups])
     for key, n in notes.items():
         out += [""] + [f"\\* paper, {t['row_labels'][key]}, {t['columns'][c]['label']}: {txt}" for c, txt in n.items()]
     return out

@@ -51,12 +51,13 @@ def test_app_table_beside_the_paper_and_missing_ones_listed(tmp_path):
     assert "| `eval_coap` |" in ev and "not recorded" in ev
     # what is missing, with the commands
     missing = text[text.index("## Results still missing"):text.index('<a id="eval">')]
-    for cmd in ("volsmpl egohmr --out out/egohmr", "volsmpl motion --out out/motion",
+    for cmd in ("volsmpl egohmr sample --split test --tuned docs/egohmr/tune.json --out out/egohmr",
+                "volsmpl motion tune --model volsmpl,coap,mesh --scenes all --published-cost --out out/motion",
                 "volsmpl eval --out docs/eval_volsmpl_anny.json", "volsmpl bench --out docs/bench_cpu.json"):
         assert f"`{cmd}" in missing
     assert "`hoi`" not in missing and "hoi" not in status["missing"]
     assert {"egohmr", "motion", "eval_volsmpl", "bench", "selfpen"} <= set(status["missing"])
-    assert "No results yet: run `volsmpl egohmr --out out/egohmr`." in text
+    assert "No results yet: run `volsmpl egohmr sample --split test --tuned docs/egohmr/tune.json --out out/egohmr`." in text
     assert sorted(status["unknown"]) == ["eval_coap", "hoi"]
 
 
@@ -232,3 +233,19 @@ def test_eval_section_states_the_sampling_of_each_result(tmp_path):
     assert "- VolumetricSMPL: 64 validation bodies, 60,000 points each (parts sampling, near-surface offsets 0.020 m)" in text
     assert "- COAP: 64 validation bodies, 60,000 points each (body sampling, near-surface offsets 0.010 m)" in text
     assert "does not publish the sampling behind its Table 1" in text
+
+
+def test_wide_summaries_keep_the_paper_columns_first_and_tables_at_most_ten_columns(tmp_path):
+    """A summary with many measures: the paper's columns first, then ours up to ten columns a table; the rest in
+    further tables of our rows, every measure shown once."""
+    extra = {f"m{i:02d}": float(i) for i in range(15)}
+    res = write(tmp_path / "h.json", {"summary": {"volsmpl": {"iter_ms": 12.5, **extra}}})
+    text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"hoi": res}, git=NoGit())
+    hoi = text[text.index("## Human-object"):text.index("Sources:", text.index("## Human-object"))]
+    tables = [ln for ln in hoi.splitlines() if ln.startswith("| row")]
+    # Table 3's four columns and five of ours; then nine of ours; then the last one
+    assert [len(h.split("|")) - 2 for h in tables] == [10, 10, 2]
+    assert tables[0].startswith("| row | per iteration [ms] | total [min] | collision [%] | contact [cm] | m00 |")
+    cols = [c.strip() for h in tables for c in h.split("|")[2:-1]]
+    assert sorted(c for c in cols if c.startswith("m")) == sorted(extra)          # each measure once
+    assert "| ours: volsmpl | 12.50 |" in hoi
