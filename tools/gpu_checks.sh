@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The GPU checklist, run on a GPU machine (a bare image with CUDA torch and no open3d) from the repo root:
-#     tools/gpu_checks.sh session            # the whole checklist in one call (~9 min): cuda tests, bench, profile, CUDA-graph probe,
+#     tools/gpu_checks.sh all            # the whole checklist in one call (~9 min): cuda tests, bench, profile, CUDA-graph probe,
 #                                            # selfpen, motion's cost and the training step's breakdown on CUDA
 #     tools/gpu_checks.sh checks             # cuda-marked tests and selfpen on CUDA
 #     tools/gpu_checks.sh bench              # `volsmpl bench --device cuda` (B = 1, 8; 60k points)
@@ -43,7 +43,7 @@ step() {  # step NAME TIMEOUT CMD...: run with a wall-clock limit, log to $W/NAM
 }
 
 case "${1:-}" in
-session)  # the engine's CUDA paths first (tests), then its figures; each step bounded so that the call ends in ~9 min
+all)  # the engine's CUDA paths first (tests), then its figures; each step bounded so that the call ends in ~9 min
     step pytest_cuda 90 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
         tests/volume/engine/test_encode_graph.py tests/volume/engine/test_query_graph.py tests/body/test_partition.py tests/train/test_loop.py tests/train/test_state.py tests/geometry/test_groundtruth.py \
         tests/train/test_contact_training.py tests/volume/test_code_refinement.py
@@ -61,7 +61,7 @@ session)  # the engine's CUDA paths first (tests), then its figures; each step b
         --render 0 --published-cost --out "$W/motion"
     step gt_profile 60 python3 tools/gt_profile.py --config checkpoints/volsmpl_b8q.json --device cuda \
         --backends torch --steps 3 --trace   # the training step's breakdown on the device (make, ground truth, fwd/bwd), then the profiler's view of one batch
-    cat "$W"/*.log > "$OUT/session.log" ;;
+    cat "$W"/*.log > "$OUT/all.log" ;;
 checks)
     step pytest_cuda 170 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
         tests/volume/engine/test_encode_graph.py tests/volume/engine/test_query_graph.py tests/apps/egohmr/test_app.py tests/geometry/test_groundtruth.py tests/body/test_partition.py tests/train/test_loop.py tests/train/test_state.py
@@ -126,5 +126,5 @@ batch)  # ~60 s: the batch maker's device paths against the CPU, the step's brea
         --backends torch --steps 3 --trace
     cp "$W/pytest_batch.log" "$W/gt_profile.log" "$OUT"/ ;;
 *)
-    echo "usage: tools/gpu_checks.sh session|checks|bench|apps|egohmr|batch|train SRC SECONDS" >&2; exit 2 ;;
+    echo "usage: tools/gpu_checks.sh all|checks|bench|apps|egohmr|batch|train SRC SECONDS" >&2; exit 2 ;;
 esac

@@ -56,7 +56,7 @@ def add_parser(sub):
     p.add_argument("--encoder-bf16", action="store_true",
                    help="sample/tune: run the learned guides' part encoder (most of a guided step's cost) under "
                         "bfloat16 autocast, both kinds alike: ~1.5x faster per frame on a CPU with AVX512-BF16 or AMX "
-                        "(emulated, not timed, on one without), codes rounded (README, apps/egohmr); default float32")
+                        "(emulated, not timed, on one without), codes rounded (docs/history/readme.md); default float32")
     p.add_argument("--batch", type=int, default=16, help="frames sampled together")
     p.add_argument("--budget-mb", type=float, default=2048.0, help="memory budget of the measured largest batch")
     p.add_argument("--no-max-batch", action="store_true", help="skip measuring the largest batch")

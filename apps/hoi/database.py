@@ -42,7 +42,7 @@ from .case import HoiCase, Similarity, case_to_dict, load_case, save_case
 from .interactions import RECIPES, Recipe
 from volsmpl.body.rig import Rig
 
-# 2 (2026-11-25): the body-inside-object check counts winding numbers exactly (MeshQuery, float64) on the objects'
+# 2: the body-inside-object check counts winding numbers exactly (MeshQuery, float64) on the objects'
 # touching components, where open3d's float32 rays miscounted (volsmpl.geometry.point_mesh_distance.winding_numbers)
 DB_VERSION = 2
 KIND_NAMES = tuple(RECIPES)

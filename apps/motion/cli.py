@@ -86,7 +86,7 @@ def add_parser(sub):
     p.add_argument("--encoder-bf16", action="store_true",
                    help="run the learned kinds' part encoder (the PointNet, most of the collision term's cost) under "
                         "bfloat16 autocast, both kinds alike: ~1.7x faster per frame on a CPU with AVX512-BF16 or AMX "
-                        "(emulated, not timed, on one without), codes rounded (README, apps/motion); default float32")
+                        "(emulated, not timed, on one without), codes rounded (docs/history/readme.md); default float32")
     p.add_argument("--batch", type=int, default=1,
                    help="optimise up to N start/goal pairs of a room together (one harness run; each walk its own "
                         "objective): fills a GPU; 1 (default) keeps the per-sequence time and memory columns")

@@ -100,7 +100,7 @@ def paper_summary(records: dict, costs: dict, coll_frames: dict, weights: dict) 
 
 def tuned_summary(records: dict, choice: dict, tune: list, test: list, costs: dict, coll_frames: dict,
                   weights: dict) -> tuple[dict, dict]:
-    """--protocol tuned: summary.<model> over the test rooms at the weight chosen on the tuning rooms (the rows
+    """`volsmpl motion tune`: summary.<model> over the test rooms at the weight chosen on the tuning rooms (the rows
     that compare the models), summary.<model>_w<w> the sweep over the tuning rooms; and the tuning record."""
     summary = {}
     for m, c in choice.items():

@@ -42,7 +42,7 @@ PAPER = paper.rows("selfpen")
 # (apps/selfpen/tune.py, all 17 cases, docs/selfpen/tune.json): the paper's lr * w_prior (1e-2) kept, the SDF read in
 # centimetres (tau 1 cm: the sharpness of COAP's occupancy), every step limited to 0.1 rad per joint (plain SGD flung
 # bodies: one step could move the spine by tens of degrees), lr * w_selfpen 0.03 (the best mean of 1e-3 .. 0.3 for both
-# models: 0.1 with the COAP shipped before its catch-up, 0.03 since; 2026-11-25 run), 3 empty draws to stop, a stall stop after 10 steps without a new low (10 % below the best), and no backward
+# models: 0.1 with the COAP shipped before its catch-up, 0.03 since), 3 empty draws to stop, a stall stop after 10 steps without a new low (10 % below the best), and no backward
 # pass through the part encoder (code_grad False, Volume.selfpen_loss), all for both models alike.
 PRESETS = {
     "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1, "tau": 1.0, "patience": 0, "stall_rtol": 0.0,

@@ -113,7 +113,7 @@ TABLE_4 = {
                     "mpjpe_vis_mm": 65.8, "mpjpe_invis_mm": 107.5},
     },
     "row_labels": {"coap": "w. COAP", "volsmpl": "w. Ours"},
-    # the app's summary keys (issue #24's names) for the columns named otherwise
+    # the app's summary keys for the columns it names otherwise
     "our_keys": {"batch": "max_batch", "collision": "collision_ratio", "mpjpe_vis_mm": "mpjpe_visible_mm",
                  "mpjpe_invis_mm": "mpjpe_invisible_mm"},
 }

@@ -30,7 +30,7 @@ from volsmpl.volume.engine.lean_query import DECODER_SCOPE, LeanQuery
 from volsmpl.volume.models import kind_of_network, model_kind
 from volsmpl.nn.analytic import box_sdf
 from volsmpl.nn.pairs import group_counts
-from volsmpl.nn.volsmpl_net import PartCode
+from volsmpl.nn.volsmpl_net import PartCode, VolumetricSMPLNet
 from volsmpl.body.partition import Partition
 from volsmpl.volume.precision import check_precision, matmul_precision
 from volsmpl.volume.engine.chunks import assemble_chunks, point_ranges

@@ -1,4 +1,4 @@
-"""Would a CUDA graph take the encoder's launch cost away? A measurement for issue 28, not a feature.
+"""Would a CUDA graph take the encoder's launch cost away? A measurement of the encoder's launch cost, not a feature.
 
     python docs/scripts/cuda_graphs_probe.py [--batch 1 8] [--repeats 20]
 

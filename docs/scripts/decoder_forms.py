@@ -2,7 +2,7 @@
 
     python docs/scripts/decoder_forms.py [--threads 1] [--points 60000] [--rounds 6] [--tiles 4096 2048]
 
-Forms: 'rows T' (the default since 2026-11-27: each (body, part) group's rows through its own weights in tiles of T
+Forms: 'rows T' (the default: each (body, part) group's rows through its own weights in tiles of T
 rows, volsmpl.nn.group_rows) and 'batched' (`set_tile_rows(None)`: the pairs cut into padded chunks, one batched
 matmul per layer over all of them, the GPU's form). The bench's inputs (`bench_jobs.make_frames`, the shipped
 checkpoint), B = 1 and B = 8 (body 0 of the batch alone for B = 1); each round times every form once per batch

@@ -2,8 +2,7 @@
 
     python docs/scripts/tile_rows_sweep.py [--threads 1] [--batch 1 8] [--points 60000] [--rounds 5]
 
-The tile size of the padded batched form (8,192 rows) was chosen on the project's first machine (AMD EPYC); since
-2026-11-27 the CPU's no-grad decoder runs each group's rows in tiles of 4,096 (volsmpl.nn.group_rows: 2,048-8,192
+The tile size of the padded batched form (8,192 rows) was chosen on the project's first machine (AMD EPYC); the CPU's no-grad decoder runs each group's rows in tiles of 4,096 (volsmpl.nn.group_rows: 2,048-8,192
 timed within noise of each other on the Intel Xeon); the decoder's share of the matmul rate differs by machine. Every setting is timed in turn, round after round, in one process on the
 benchmark's inputs (`bench_jobs.make_frames`, the shipped checkpoint), so a busy machine slows all of them alike;
 reports the median milliseconds per body for each (batch, tile rows) and the operator calls of one query. Values are
