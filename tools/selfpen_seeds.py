@@ -2,9 +2,9 @@
 read by `volsmpl report`): each seed's summary per model, the mean over seeds of the time, memory, iteration and
 collision columns, and the ratio of triangle collisions removed per second of repair, VolumetricSMPL over COAP.
 
-    for s in 0 1 2 3; do volsmpl selfpen --model volsmpl,coap --seed $s --threads 1 --out out/selfpen_seed$s; done
+    for s in 0 1 2 3; do volsmpl selfpen --model volsmpl,coap --sampler-seed $s --threads 1 --out out/selfpen_seed$s; done
     python tools/selfpen_seeds.py out/selfpen_seed0 out/selfpen_seed1 out/selfpen_seed2 out/selfpen_seed3 \
-        --command "volsmpl selfpen --model volsmpl,coap --seed S --threads 1 (S = 0..3)" --out docs/selfpen/seeds.json
+        --command "volsmpl selfpen --model volsmpl,coap --sampler-seed S --threads 1 (S = 0..3)" --out docs/selfpen/seeds.json
 """
 from __future__ import annotations
 

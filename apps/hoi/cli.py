@@ -21,7 +21,8 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
-from volsmpl.apps.table import add_common, check_common, checkpoint_names, envelope, volumes, write_results
+from volsmpl.apps.table import (CaseRecords, add_common, check_common, checkpoint_names, envelope, volumes,
+                                write_results)
 
 from .console import case_line, format_table
 
@@ -117,8 +118,6 @@ def run(args) -> int:
     from volsmpl.io.outputs import check_writable
     from volsmpl.io.provenance import machine_info
 
-    from volsmpl.io.case_store import CaseStore, job_key
-
     from volsmpl.apps.hoi import database
     from .case import case_to_dict, load_case, mesh_digest
     from .figures import case_panel, summary_plot
@@ -154,7 +153,7 @@ def run(args) -> int:
     config = {**asdict(cfg), "models": models, "checkpoints": checkpoint_names(models, ckpts), "split": split,
               "seed": args.seed, "batch": args.batch, "cases_requested": len(cases),
               "threads": torch.get_num_threads()}
-    store = CaseStore(out / "cases", resume=args.resume)
+    store = CaseRecords(out, "hoi", resume=args.resume)
     per_model = {m: [] for m in models}
     for i0 in range(0, len(cases), args.batch):
         group = cases[i0:i0 + args.batch]
@@ -164,11 +163,9 @@ def run(args) -> int:
         for m in models:
             # the batch size and the thread count are part of a fit's key: its time per case depends on both
             # (and the thread count may change the summation order of its values)
-            keys = {c.name: job_key({"config": asdict(cfg), "model": m, "case": case_to_dict(c),
-                                     **({"mesh_sha256": digests[c.name]} if digests[c.name] else {}),
-                                     **({"batch": args.batch} if args.batch > 1 else {}),
-                                     "threads": torch.get_num_threads()},
-                                    modules=[vols[m]], packages=["volsmpl.apps.hoi"]) for c in group}
+            keys = {c.name: store.key({"config": asdict(cfg), "model": m, "case": case_to_dict(c),
+                                       **({"mesh_sha256": digests[c.name]} if digests[c.name] else {}),
+                                       **({"batch": args.batch} if args.batch > 1 else {})}, vols[m]) for c in group}
             recs = {c.name: store.get(f"{c.name}_{m}", keys[c.name]) for c in group}
             todo = [c for c in group if recs[c.name] is None]
             if todo:
@@ -197,8 +194,9 @@ def run(args) -> int:
                           figures)
         summary_plot(out / "summary.png", summary)
         write_results(out, result)
-    if store.reused:
-        print(f"--resume: {store.reused} fit(s) reused from {out / 'cases'}; {store.stale} stale record(s) refitted")
+    note = store.note()
+    if note:
+        print(note)
     print(format_table(summary))
     print(f"wrote {out / 'results.json'}")
     return 0

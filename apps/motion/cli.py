@@ -130,21 +130,14 @@ def _print_case(scene: str, k: int, label: str, met: dict, reused: bool = False)
           + ("  (reused)" if reused else ""), flush=True)
 
 
-def run(args) -> int:
-    import volsmpl
-    from volsmpl.apps.table import check_common, checkpoint_names, envelope, volumes, write_results
-    from volsmpl.io.case_store import CaseStore, job_key
-    from volsmpl.io.provenance import machine_info
-    from volsmpl.report import paper
+def _checked(args) -> dict:
+    """Every option checked before any work: kinds, checkpoints, weights, frames, budgets, the protocol."""
+    from volsmpl.apps.table import check_common
     from volsmpl.volume.models import model_kind
 
-    from volsmpl.apps.motion import walk as W
-    from .figures import topdown
-    from .scenes import check_endpoint, check_pair, floor_xz, load_scene, room_scenes
-    from .synth import SynthConfig, check_frames, measure_cost, published_penetration, synthesize_batch
+    from .synth import check_frames
 
     models, ckpts = check_common(args)
-    out = Path(args.out)
     protocol = "tuned" if args.action == "tune" else "paper"
     weights = parse_weights(args.w, models)
     frames = check_frames(args.frames)
@@ -168,6 +161,12 @@ def run(args) -> int:
                          f"runs none: add volsmpl or coap, or drop the flag")
     if args.published_cost and "coap" not in models:
         raise ValueError("--published-cost measures COAP as published: add coap to --model")
+    return {"models": models, "ckpts": ckpts, "protocol": protocol, "weights": weights, "frames": frames, "cf": cf}
+
+
+def _scenes(args, frames: int) -> list:
+    """The user's scene with its start and goal (checked: units, floor, obstacles), or the generated rooms."""
+    from .scenes import check_endpoint, check_pair, floor_xz, load_scene, room_scenes
 
     if args.scene is not None:
         sc = load_scene(args.scene, up=args.up, units=args.units, floor_y=args.floor_y)
@@ -176,28 +175,31 @@ def run(args) -> int:
         check_pair(sc, s, g, frames, args.units)   # first: a scene in the wrong units shows here (its message says so)
         s, g = check_endpoint(sc, s, "--start"), check_endpoint(sc, g, "--goal")
         sc.pairs = [(s, g)]
-        scenes = [sc]
-    else:
-        if args.start is not None or args.goal is not None:
-            raise ValueError("--start/--goal need --scene (generated rooms draw their own pairs)")
-        n = ALL_SCENES if str(args.scenes).strip().lower() == "all" else int(args.scenes)
-        if n < 1:
-            raise ValueError(f"--scenes must be 'all' or >= 1, got {args.scenes}")
-        scenes = room_scenes(n, args.sequences, frames, first_seed=args.seed)
+        return [sc]
+    if args.start is not None or args.goal is not None:
+        raise ValueError("--start/--goal need --scene (generated rooms draw their own pairs)")
+    n = ALL_SCENES if str(args.scenes).strip().lower() == "all" else int(args.scenes)
+    if n < 1:
+        raise ValueError(f"--scenes must be 'all' or >= 1, got {args.scenes}")
+    return room_scenes(n, args.sequences, frames, first_seed=args.seed)
 
-    body = volsmpl.create_body().to(args.device)
-    model = W.WalkModel(body)
-    vols = volumes(body, models, ckpts, args.device, encoder_bf16=args.encoder_bf16)  # bf16: in every key
-    budget = args.mem_budget_gb * 2 ** 30
+
+def _costs(args, body, model, vols: dict, scenes: list, opt: dict) -> tuple[dict, dict]:
+    """The collision term's per-frame cost per kind on the first room's full cloud and straight walk, and the frames
+    each kind's term evaluates (--coll-frames, or what fits --mem-budget-gb)."""
+    import volsmpl
+
+    from .synth import initial_controls, measure_cost, published_penetration, speed_of_control
+
+    frames, cf, budget = opt["frames"], opt["cf"], args.mem_budget_gb * 2 ** 30
     sc0 = scenes[0]
     s0, g0 = sc0.pairs[0]
-    from .synth import initial_controls, speed_of_control
     init = initial_controls(s0, g0, frames, body.v_template.dtype, body.v_template.device)
     with torch.no_grad():
         probe = model(init["heading_delta"], speed_of_control(init["speed_u"]), frames=frames, start=init["start"],
                       heading0=init["heading0"])
     costs, coll_frames = {}, {}
-    for m in models:   # the per-frame cost on the full cloud, on the straight walk of the first pair
+    for m in opt["models"]:   # the per-frame cost on the full cloud, on the straight walk of the first pair
         costs[m] = measure_cost(vols[m], probe, sc0.points, frames=args.cost_frames, repeats=args.cost_repeats,
                                 device=args.device)
         line = fit_budget(costs[m], budget)
@@ -205,16 +207,36 @@ def run(args) -> int:
         coll_frames[m] = ("all" if fits else 16) if cf == "auto" else ("all" if cf == "all" else int(cf))
         print(f"{m:8s} {line} -> collision on {coll_frames[m]} frames")
     if args.published_cost:  # COAP's own code: every part at every point, the same values (cost only)
-        pub = volsmpl.attach_volume(body, ckpts.get("coap"), model="coap", dense=True).to(args.device)
+        pub = volsmpl.attach_volume(body, opt["ckpts"].get("coap"), model="coap", dense=True).to(args.device)
         pub.net.encoder_bf16 = args.encoder_bf16
         costs[PUBLISHED] = measure_cost(pub, probe, sc0.points, frames=1, repeats=args.cost_repeats,
                                         device=args.device, loss=published_penetration)
         print(f"coap as published {fit_budget(costs[PUBLISHED], budget)}")
         del pub
+    return costs, coll_frames
 
+
+def run(args) -> int:
+    import volsmpl
+    from volsmpl.apps.table import CaseRecords, checkpoint_names, envelope, volumes, write_results
+    from volsmpl.io.provenance import machine_info
+    from volsmpl.report import paper
+
+    from volsmpl.apps.motion import walk as W
+    from .figures import topdown
+    from .synth import SynthConfig, synthesize_batch
+
+    opt = _checked(args)
+    models, ckpts, protocol, weights, frames = (opt[k] for k in ("models", "ckpts", "protocol", "weights", "frames"))
+    out = Path(args.out)
+    scenes = _scenes(args, frames)
+    body = volsmpl.create_body().to(args.device)
+    model = W.WalkModel(body)
+    vols = volumes(body, models, ckpts, args.device, encoder_bf16=args.encoder_bf16)  # bf16: in every key
+    costs, coll_frames = _costs(args, body, model, vols, scenes, opt)
     records = {(m, w): [] for m in models for w in weights[m]}
     cases, figures = {}, {}
-    store = CaseStore(out / "cases", resume=args.resume)
+    store = CaseRecords(out, "motion", resume=args.resume)
 
     def run_scene(sc, plan) -> None:
         """Walk every pair of room `sc` for each (model, weight) of `plan`, reusing stored sequences; its figure."""
@@ -228,11 +250,10 @@ def run(args) -> int:
             names, keys, recs = [], [], {}
             for k, (s, g) in enumerate(sc.pairs):
                 names.append(f"{sc.name}_{k}_{label}")
-                keys.append(job_key({"config": asdict(cfg), "w": w, "model": m, "scene": sc.name, "cloud": cloud,
-                                     "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(),
-                                     "batch": args.batch, "body": body.fingerprint, "encoder_bf16": args.encoder_bf16,
-                                     "threads": torch.get_num_threads()},
-                                    modules=[vols[m]], packages=["volsmpl.apps.motion"]))
+                keys.append(store.key({"config": asdict(cfg), "w": w, "model": m, "scene": sc.name, "cloud": cloud,
+                                       "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(),
+                                       "batch": args.batch, "body": body.fingerprint,
+                                       "encoder_bf16": args.encoder_bf16}, vols[m]))
                 rec = store.get(names[k], keys[k])
                 if rec is not None:
                     recs[k] = rec
@@ -301,5 +322,8 @@ def run(args) -> int:
         result["paired"] = paired_differences(runs)
         print(format_pairs(result["paired"]))
     write_results(out, result)
+    note = store.note()
+    if note:
+        print(note)
     print(f"wrote {out / 'results.json'}")
     return 0
