@@ -21,9 +21,9 @@
 #      resident set in a thread: its cost columns are not quoted), in out/motion_cost/results.json (no walk is
 #      optimised: --iters 0), and the frame strips of rooms 0 and 1's first pairs (docs/motion/strip_*.png);
 #   4. the compared rows' paired differences with bootstrap intervals (volsmpl.apps.motion.stats), docs/motion/paired.json.
-# Each step prints what it wrote; the README's motion section is then written by hand from docs/motion/results.json
-# (quality columns), out/motion_cost/results.json (per-frame cost columns), out/motion_strips/results.json (the
-# total memory of one whole-walk optimisation, measured by the current meter) and docs/motion/paired.json.
+# Each step prints what it wrote; `volsmpl report` then tabulates docs/motion/results.json (quality columns) and
+# docs/motion/paired.json beside the paper's; out/motion_cost/results.json holds the per-frame cost columns of the
+# current code and out/motion_strips/results.json the total memory of one whole-walk optimisation.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 V="$(pwd)/.venv/bin/volsmpl"
@@ -68,4 +68,4 @@ cp out/motion_strips/strip_*.png docs/motion/
 
 echo "== 4. paired differences of the compared rows (bootstrap intervals over the test sequences)"
 "$(pwd)/.venv/bin/python" -m volsmpl.apps.motion.stats docs/motion/results.json --out docs/motion/paired.json
-echo "motion_assemble: done; write the README's motion section from docs/motion/results.json and out/motion_cost/results.json"
+echo "motion_assemble: done; run volsmpl report (docs/report.md reads docs/motion/results.json)"

@@ -7,7 +7,7 @@
 Poses `--frames` bench frames (`volsmpl.bench.jobs.make_frames`: 60k points per body, half uniform in the body box,
 half near the surface), then times `t` (a fresh encoding of each frame's pose and the query, `--rounds` passes over
 the frames) and `t query` (15 queries on one cached encoding), medians per body, in this process: the machine's
-drift over minutes falls on both versions alike when they alternate (the README's "Lean query, second pass").
+drift over minutes falls on both versions alike when they alternate (docs/history/readme.md, "Lean query, second pass").
 """
 import argparse
 import statistics
