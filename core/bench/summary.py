@@ -193,7 +193,7 @@ def format_report(result: dict) -> str:
 
 
 def to_markdown(result: dict) -> str:
-    """Markdown report (included by the README)."""
+    """The Markdown report of a bench result (docs/bench_cpu.md, docs/bench_cuda.md)."""
     c = result["config"]
     out = ["# Benchmark: time, memory and cost of the volumetric body models", "",
            f"`volsmpl bench` with batch sizes {list(c['batches'])}, {c['n_points']} query points per body, median of "

@@ -38,10 +38,9 @@ FLOPs per pair (folded, flag folded): 835,072 at K=16 (query encoder 179,200 + d
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, Dict, List, NamedTuple, Optional, Sequence, Tuple
+from typing import List, NamedTuple, Optional, Sequence, Tuple
 
 import torch
 from torch import nn

@@ -6,7 +6,7 @@ The defaults are the paper's values; a :class:`VolumeConfig` is stored in every 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Dict, Tuple
 
 

@@ -5,7 +5,7 @@ Each group's rows are a contiguous range of the group-sorted pairs, so a layer i
 group's own (out, in) weight read in place as a transposed view: no padded chunks, no per-chunk copies of the
 weights, no gathers of the points or scatters of the results. On the project's 2-core CPU, on the 44.5k pairs (16
 groups) of one 60k-point query and 1 thread, this ran 1.4-1.6x faster than the padded batched matmul of
-`NBWDecoder.mlp_chunks` (693cf34; whole queries gain less: README, "Benchmark").
+`NBWDecoder.mlp_chunks` (693cf34; whole queries gain less: docs/bench_cpu.md).
 The loop costs about 16 operator calls per group and tile, which a GPU would pay as launches: there
 `decode_pairs` keeps the batched form.
 

@@ -29,7 +29,7 @@ from typing import Callable
 import torch
 
 from volsmpl.runtime.meter import Meter, sync
-from .stops import MaxIters, StopRule
+from .stops import MaxIters
 
 __all__ = ["Variable", "Term", "Evaluation", "StepRecord", "OptimResult", "optimize"]
 

@@ -297,8 +297,21 @@ def parse_overrides(items, sections: dict | None = None, flag: str = "--results"
             raise ValueError(f"{flag} {name}: unknown result name (names: {', '.join(known)})")
         if not Path(path).is_file():
             raise FileNotFoundError(f"{flag} {name}={path}: file not found")
+        _same_app(name, Path(path), sections or SECTIONS, flag)
         out[name] = Path(path)
     return out
+
+
+def _same_app(name: str, path: Path, sections: dict, flag: str) -> None:
+    """A results.json that names its app (volsmpl.apps.table's envelope) is refused for another app's section."""
+    key = next(k for k, s in sections.items() if name in s.results)
+    if name != key:
+        return   # a section's further results (seeds, tuning sweeps, paired differences) have no envelope
+    data = load_json(path)
+    app = data.get("app")
+    if isinstance(app, str) and app != key:
+        raise ValueError(f"{flag} {name}={path} is a results.json of `volsmpl {app}`, not of `volsmpl {key}`: give "
+                         f"{key}'s results (or {app}={path})")
 
 
 def _locate(default, root: Path) -> Path | None:

@@ -65,8 +65,8 @@ def attach_volume(body, checkpoint: str | Path | None = None, pretrained: bool =
                          f"weights and ignore the checkpoint; drop pretrained=False to load it, or the checkpoint "
                          f"for random weights.")
     if config is not None and pretrained:
-        raise ValueError(f"attach_volume: config is the architecture of random weights (pretrained=False) and would "
-                         f"be ignored: a checkpoint carries its own; pass pretrained=False with it, or drop config.")
+        raise ValueError("attach_volume: config is the architecture of random weights (pretrained=False) and would "
+                         "be ignored: a checkpoint carries its own; pass pretrained=False with it, or drop config.")
     meta, state = {}, None
     if pretrained:
         path = Path(checkpoint) if checkpoint is not None else kind.default_checkpoint

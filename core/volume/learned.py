@@ -30,7 +30,7 @@ from volsmpl.volume.engine.lean_query import DECODER_SCOPE, LeanQuery
 from volsmpl.volume.models import kind_of_network, model_kind
 from volsmpl.nn.analytic import box_sdf
 from volsmpl.nn.pairs import group_counts
-from volsmpl.nn.volsmpl_net import PartCode, VolumetricSMPLNet
+from volsmpl.nn.volsmpl_net import VolumetricSMPLNet
 from volsmpl.body.partition import Partition
 from volsmpl.volume.precision import check_precision, matmul_precision
 from volsmpl.volume.engine.chunks import assemble_chunks, point_ranges
@@ -442,7 +442,7 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         code_grad=False treats the part codes as constants: the pose gradient then flows through the part
         frames only (rigid part motion), not through the change of each part's shape code, and the backward
         pass skips the encoder (about half of a step's time; its cosine with the full gradient on the
-        self-intersection cases is measured in docs/ and the README).
+        self-intersection cases: >= 0.97, docs/history/readme.md).
         Only the parts of overlapping box pairs are encoded (unless the output is encoded already): a
         sample lies in two parts' boxes, and a part that forms no overlapping pair with the sample's
         other parts can neither be involved nor be a partner, so the loss and its gradients are those

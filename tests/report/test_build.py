@@ -249,3 +249,18 @@ def test_wide_summaries_keep_the_paper_columns_first_and_tables_at_most_ten_colu
     cols = [c.strip() for h in tables for c in h.split("|")[2:-1]]
     assert sorted(c for c in cols if c.startswith("m")) == sorted(extra)          # each measure once
     assert "| ours: volsmpl | 12.50 |" in hoi
+
+
+def test_a_result_of_another_app_is_refused_for_a_section(tmp_path, capsys):
+    """--results hoi=<selfpen's results.json> rendered selfpen's numbers as Table 3, marked current; a results.json
+    names its app, and the report refuses it for another app's section in one line (before writing anything)."""
+    from volsmpl.cli import main
+
+    other = write(tmp_path / "selfpen" / "results.json", {"app": "selfpen", "summary": {"volsmpl": {"step_ms": 1.0}}})
+    out = tmp_path / "r.md"
+    assert main(["report", "--out", str(out), "--results", f"hoi={other}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "is a results.json of `volsmpl selfpen`, not of `volsmpl hoi`" in err and "\n" not in err
+    assert not out.exists()
+    own = write(tmp_path / "hoi" / "results.json", {"app": "hoi", "summary": {"volsmpl": {"iter_ms": 1.0}}})
+    assert report.parse_overrides([f"hoi={own}", f"selfpen={other}"]) == {"hoi": own, "selfpen": other}
