@@ -194,6 +194,8 @@ MUTANTS = {
                               [T + "apps/selfpen/test_app.py::test_cli_case_and_checkpoint_mistakes_stop_before_any_work"]),
     "case_records_ignore_the_settings": ("apps/table.py", "        key = self.key(spec, volume)", "        key = self.key({}, volume)",
                                          [T + "apps/selfpen/test_app.py::test_cli_resume_reuses_finished_repairs_and_refits_changed_settings"]),
+    "egohmr_resume_key_of_every_guide": ("apps/egohmr/run.py", 'if k not in ("scales", "models", "checkpoints")}', "}",
+                                         [T + "apps/egohmr/test_app.py::test_resume_reuses_each_finished_guide_and_samples_again_on_other_settings"]),
     # apps/motion: the table's paired differences
     "paired_by_list_order": ("apps/motion/stats.py", "common = sorted(set(seqs[a]) & set(seqs[b]))",
                              "common = list(seqs[a])[:min(len(seqs[a]), len(seqs[b]))]; seqs = {a: dict(zip(common, "

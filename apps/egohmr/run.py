@@ -100,8 +100,10 @@ def run_sample(args) -> int:
                 s["max_batch"], s["peak_mem_mb"] = mb["max_batch"], mb["measured_mb"][str(args.batch)]
             return {"summary": s, "max_batch": mb, "records": recs}
 
-        spec = {**config, "guide": g, "options": asdict(opts), "frame_names": [f.name for f in frames],
-                "no_max_batch": args.no_max_batch}
+        # this guide's settings only: another guide's scale does not change its samples
+        spec = {**{k: v for k, v in config.items() if k not in ("scales", "models", "checkpoints")}, "guide": g,
+                "scale": scales[g], "checkpoint": config["checkpoints"][g], "options": asdict(opts),
+                "frame_names": [f.name for f in frames], "no_max_batch": args.no_max_batch}
         done, reused = store.get_or_make(f"guide_{g}", spec, vol, make)
         s = done["summary"]
         if done["max_batch"] is not None:

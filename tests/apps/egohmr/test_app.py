@@ -116,6 +116,34 @@ def test_encoder_bf16_reaches_the_learned_guides_encoders(tmp_path, tiny_ckpt, e
         assert json.loads((out / "results.json").read_text())["config"]["encoder_bf16"] is bool(flag)
 
 
+def test_resume_reuses_each_finished_guide_and_samples_again_on_other_settings(tmp_path, tiny_ckpt, capsys, monkeypatch):
+    """sample --resume takes a guide's samples from OUT/cases/ when the same settings, frames and weights made them
+    (the results equal the first run's), and samples again under another guidance scale."""
+    import volsmpl.apps.egohmr.evaluate as E
+
+    ckpt, _ = tiny_ckpt
+    out = tmp_path / "out"
+    argv = ["egohmr", "sample", "--model", "none,mesh", "--frames", "1", "--checkpoint", str(ckpt), "--out", str(out),
+            "--render", "0", "--batch", "1", "--no-max-batch", "--threads", "1"]
+    assert main(argv) == 0
+    first = json.loads((out / "results.json").read_text())
+    calls = []
+    real = E.sample_frames
+    # a guide's sampling passes its volume (None for 'none') after the inputs; the regressor's scoring does not
+    monkeypatch.setattr(E, "sample_frames", lambda *a, **k: calls.append(len(a) > 4) or real(*a, **k))
+    capsys.readouterr()
+    assert main(argv + ["--resume"]) == 0
+    assert capsys.readouterr().out.count("(reused)") == 2
+    assert calls == [False]                               # only the regressor's scoring ran
+    again = json.loads((out / "results.json").read_text())
+    assert again["cases"] == first["cases"] and again["summary"].keys() == first["summary"].keys()
+    for g in first["summary"]:
+        assert {k: v for k, v in again["summary"][g].items() if k != "s_per_frame"} == \
+               {k: v for k, v in first["summary"][g].items() if k != "s_per_frame"}
+    assert main(argv + ["--resume", "--scale", "mesh=3"]) == 0
+    assert "mesh     a=3" in capsys.readouterr().out and calls.count(True) == 1     # 'none' reused, mesh again
+
+
 def test_user_frame_of_another_resolution_is_refused(tmp_path):
     """K, image_size and keypoints must describe one image: K for twice the resolution, [W, H] for [H, W] and a
     confident keypoint far outside the image are named; a keypoint out of view with confidence 0 is fine."""
