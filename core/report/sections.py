@@ -238,7 +238,8 @@ def selfpen_section(ctx) -> list[str]:
     extra = ["collisions_before", "collidable_before", "collidable_after", "pose_change_deg", "removed_per_s"]
     out = summary_table("6", groups, key_map={"collisions": "collisions_after"}, extra=extra)
     kinds = sorted({s.get("memory_kind") for _, _, s in groups if s.get("memory_kind")})
-    out += ["", f"Ours: preset {d.get('preset', 'not recorded')}, memory {', '.join(kinds) or 'not recorded'}; "
+    preset = get_path(d, "config.preset") or d.get("preset", "not recorded")   # the envelope's config, or top level
+    out += ["", f"Ours: preset {preset}, memory {', '.join(kinds) or 'not recorded'}; "
                 "triangle collisions after repair (pose-induced pairs; the paper counts PROX meshes)."]
     out += paper_mismatch(d, "6")
     if isinstance(tune, dict):

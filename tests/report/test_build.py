@@ -264,3 +264,13 @@ def test_a_result_of_another_app_is_refused_for_a_section(tmp_path, capsys):
     assert not out.exists()
     own = write(tmp_path / "hoi" / "results.json", {"app": "hoi", "summary": {"volsmpl": {"iter_ms": 1.0}}})
     assert report.parse_overrides([f"hoi={own}", f"selfpen={other}"]) == {"hoi": own, "selfpen": other}
+
+
+def test_selfpen_section_reads_the_preset_of_either_layout(tmp_path):
+    """selfpen's results name their preset at the top (tables made before the envelope) or in config (the envelope)."""
+    summary = {"volsmpl": {"step_ms": 50.0, "collisions_after": 200.0}}
+    for i, data in enumerate(({"preset": "paper", "summary": summary},
+                              {"app": "selfpen", "config": {"preset": "paper", "seed": 0}, "summary": summary})):
+        res = write(tmp_path / f"s{i}.json", data)
+        text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"selfpen": res}, git=NoGit())
+        assert "Ours: preset paper," in text
