@@ -77,8 +77,9 @@ def run(args) -> int:
         raise ValueError(f"--batch must be >= 1, got {args.batch}")
     if args.frames is not None and args.frames < 1:
         raise ValueError(f"--frames must be >= 1, got {args.frames}")
+    ckpts = {}
     if args.action in ("sample", "tune"):
-        models, _ = check_common(args, none=True)
+        models, ckpts = check_common(args, none=True)
         if args.encoder_bf16:
             from volsmpl.volume.models import model_kind
 
@@ -109,8 +110,8 @@ def run(args) -> int:
     from .run import run_sample, run_tune, run_user_frame
 
     if args.action == "tune":
-        return run_tune(args)
-    return run_user_frame(args) if user else run_sample(args)
+        return run_tune(args, ckpts)
+    return run_user_frame(args, ckpts) if user else run_sample(args, ckpts)
 
 
 __all__ = ["add_parser", "run", "parse_guides", "scales_of", "options_of", "GUIDES", "PAPER_SCALE", "TUNE_FACTORS"]

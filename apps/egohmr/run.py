@@ -42,25 +42,26 @@ def _setup(args, split: str):
     return body, net, meta, frames, prep, scenes
 
 
-def _volumes(args, guides: list[str], device) -> dict:
-    """guide -> its volume (None for 'none'), on a body of their own (volsmpl.apps.table.volumes)."""
+def _volumes(args, guides: list[str], ckpts: dict, device) -> dict:
+    """guide -> its volume (None for 'none'), on a body of their own (volsmpl.apps.table.volumes); ckpts: the
+    checkpoints `check_common` checked."""
     import volsmpl
-    from volsmpl.apps.table import checkpoints, volumes
+    from volsmpl.apps.table import volumes
 
-    return volumes(volsmpl.create_body(), guides, checkpoints(args, guides), device, encoder_bf16=args.encoder_bf16)
+    return volumes(volsmpl.create_body(), guides, ckpts, device, encoder_bf16=args.encoder_bf16)
 
 
-def _config(args, guides: list[str], scales: dict, frames: int, split: str) -> dict:
+def _config(args, guides: list[str], ckpts: dict, scales: dict, frames: int, split: str) -> dict:
     """What a sample or tune result records of its settings (results.json's config)."""
-    from volsmpl.apps.table import checkpoint_names, checkpoints
+    from volsmpl.apps.table import checkpoint_names
 
     return {"split": split, "frames": frames, "seed": args.seed, "models": guides, "scales": scales,
             "encoder_bf16": args.encoder_bf16, "batch": args.batch, "budget_mb": args.budget_mb,
             "network": args.checkpoint or "apps/egohmr/egohmr_anny",
-            "checkpoints": checkpoint_names(guides, checkpoints(args, guides)), "threads": torch.get_num_threads()}
+            "checkpoints": checkpoint_names(guides, ckpts), "threads": torch.get_num_threads()}
 
 
-def run_sample(args) -> int:
+def run_sample(args, ckpts: dict) -> int:
     from volsmpl.apps.table import CaseRecords, envelope, write_results
     from volsmpl.geometry.point_mesh_distance import winding_numbers
     from volsmpl.io.provenance import machine_info
@@ -75,7 +76,7 @@ def run_sample(args) -> int:
     scales = scales_of(args, guides)
     out = Path(args.out)
     body, net, meta, frames, prep, scenes = _setup(args, args.split)
-    vols = _volumes(args, guides, body.v_template.device)
+    vols = _volumes(args, guides, ckpts, body.v_template.device)
     store = CaseRecords(out, "egohmr", resume=args.resume)
     summary, records, options, batches = {}, {}, {}, {}
     # the no-diffusion baseline: the regressor's own pose, scored by the same tests (not a guide: no row in Table 4)
@@ -83,7 +84,7 @@ def run_sample(args) -> int:
     reg.pop("s_per_frame")
     print(f"regressor (no diffusion): MPJPE {reg['mpjpe_mm']:.1f} mm (vis. {reg['mpjpe_visible_mm']:.1f}, invis. "
           f"{reg['mpjpe_invisible_mm']:.1f})  collision {reg['collision_ratio']:.4f}")
-    config = _config(args, guides, scales, len(frames), args.split)
+    config = _config(args, guides, ckpts, scales, len(frames), args.split)
     config["checkpoint_meta"] = {k: meta.get(k) for k in ("step", "validation", "train_frames", "seconds")}
     for g in guides:
         opts = options_of(args, scales[g])
@@ -154,7 +155,7 @@ def run_sample(args) -> int:
     return 0
 
 
-def run_tune(args) -> int:
+def run_tune(args, ckpts: dict) -> int:
     from volsmpl.io.provenance import machine_info
 
     from volsmpl.apps.table import write_results
@@ -173,7 +174,7 @@ def run_tune(args) -> int:
     if args.split == "test":
         print("tune: tuning runs on the val split (the test split is for reporting only)")
     body, net, meta, frames, prep, scenes = _setup(args, split)
-    vols = _volumes(args, guides, body.v_template.device)
+    vols = _volumes(args, guides, ckpts, body.v_template.device)
     base = summarize(sample_frames(net, body, frames, prep, None, None, args.batch, args.seed, scenes))
     print(f"{len(frames)} {split} frames; unguided first")
     rows = [{"guide": "none", "scale": 0.0, **base}]
@@ -193,7 +194,7 @@ def run_tune(args) -> int:
     doc = {"split": split, "frames": len(frames), "rule": f"lowest collision ratio with MPJPE within "
            f"{TUNE_MPJPE_SLACK_MM} mm of the unguided sampler's", "factors": factors,
            "paper_scales": PAPER_SCALE, "encoder_bf16": args.encoder_bf16, "rows": rows, "best": best,
-           "config": _config(args, guides, {}, len(frames), split), "meta": machine_info(args.device)}
+           "config": _config(args, guides, ckpts, {}, len(frames), split), "meta": machine_info(args.device)}
     path = write_results(args.out, doc, "tune.json")
     print(f"best scales {best}; wrote {path}")
     return 0
@@ -212,7 +213,7 @@ def _user_crop(points: np.ndarray, centre: np.ndarray, n: int, seed: int) -> np.
     return c[subsample(c, n, seed=seed)]
 
 
-def run_user_frame(args) -> int:
+def run_user_frame(args, ckpts: dict) -> int:
     """A user's frame file and scene scan: each guide's sample, its collision ratio and contact (exact tests on
     the scan's points), and a figure; no ground truth, so no joint errors."""
     import volsmpl
@@ -256,7 +257,7 @@ def run_user_frame(args) -> int:
     faces = torch.as_tensor(body.faces, device=dev)
     summary, panels = {}, []
     cam = camera_of(frame.K, frame.image_size)
-    vols = _volumes(args, guides, dev)
+    vols = _volumes(args, guides, ckpts, dev)
     for g in guides:
         vol = vols[g]
         t0 = time.perf_counter()
@@ -279,7 +280,7 @@ def run_user_frame(args) -> int:
         print(f"{g:8s} collision {summary[g]['collision_ratio']:.4f}  contact {summary[g]['contact_pct']:.0f} %  "
               f"{secs:.2f} s")
     save_png(out / f"frame_{frame.name}.png", grid([p[0] for p in panels], [p[1] for p in panels], cols=2))
-    config = {**_config(args, guides, scales, 1, "user"), "frame": str(args.frame), "scene": str(args.scene),
+    config = {**_config(args, guides, ckpts, scales, 1, "user"), "frame": str(args.frame), "scene": str(args.scene),
               "units": args.units, "up": args.up}
     result = envelope("egohmr", config, summary, None, {g: [{"name": frame.name, **s}] for g, s in summary.items()},
                       machine_info(args.device),
