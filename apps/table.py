@@ -23,7 +23,7 @@ The options:
   --render N                 figures of the first N cases (0: none)
   --device cpu|cuda          where the work runs
 
-The envelope: {app, config, summary, paper, cases: {kind: [records]}, figures, meta} and, after them, what an app
+The envelope: {app, config, summary, paper, cases: {kind: [records]}, figures, meta, flagged, warnings} and, after them, what an app
 adds of its own (motion's tuning and paired differences, egohmr's regressor row and batch sizes).
 """
 from __future__ import annotations
@@ -34,7 +34,8 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ["add_common", "check_common", "check_threads", "parse_kinds", "checkpoints", "volumes",
-           "checkpoint_names", "CaseRecords", "envelope", "case_records", "write_results"]
+           "checkpoint_names", "CaseRecords", "envelope", "flag_cases", "print_flagged", "case_records",
+           "write_results"]
 
 
 
@@ -76,7 +77,7 @@ def check_threads(threads) -> None:
     """`--threads N`: N >= 1 sets torch's CPU threads; None keeps torch's default."""
     if threads is None:
         return
-    if threads < 1:
+    if not isinstance(threads, int) or threads < 1:
         raise ValueError(f"--threads {threads}: give a positive number of CPU threads (e.g. --threads 1)")
     import torch
 
@@ -197,12 +198,35 @@ class CaseRecords:
 
 
 def envelope(app: str, config: dict, summary: dict, paper, cases: dict, meta: dict, figures: dict | None = None,
-             **extra) -> dict:
-    """The results.json of every app: {app, config, summary, paper, cases: {kind: [records]}, figures, meta, ...}."""
+             flagged: list | None = None, warnings: list | None = None, **extra) -> dict:
+    """The results.json of every app: {app, config, summary, paper, cases: {kind: [records]}, figures, meta,
+    flagged, warnings, ...}: `flagged` lists the cases whose result is probably wrong (see `flag_cases`),
+    `warnings` the warning lines the run printed."""
     if not isinstance(cases, dict):
         raise TypeError(f"cases must map each kind to its records, got {type(cases).__name__}")
     return {"app": app, "config": config, "summary": summary, "paper": paper, "cases": cases,
-            "figures": figures or {}, "meta": meta, **extra}
+            "figures": figures or {}, "meta": meta, "flagged": list(flagged or []), "warnings": list(warnings or []),
+            **extra}
+
+
+def flag_cases(cases: dict, name_key: str, good) -> list[dict]:
+    """[{case, model, status, why}] of the records (envelope layout {kind: [records]}) whose `status` is not one of
+    `good`: each app judges its cases without ground truth (diverged, object lost, worse than start, ...) and
+    records the status and its reason (`status_why`) in the record."""
+    out = []
+    for kind, recs in cases.items():
+        for r in recs:
+            status = r.get("status") if isinstance(r, dict) else getattr(r, "status", None)
+            if status is not None and status not in good:
+                get = r.get if isinstance(r, dict) else (lambda k, d=None, r=r: getattr(r, k, d))
+                out.append({"case": get(name_key), "model": kind, "status": status, "why": get("status_why", "")})
+    return out
+
+
+def print_flagged(flagged: list) -> None:
+    """One line per flagged case ('flagged: <case> <model>: <status> (<why>)'), after the table."""
+    for f in flagged:
+        print(f"flagged: {f['case']} {f['model']}: {f['status']}" + (f" ({f['why']})" if f.get("why") else ""))
 
 
 def case_records(cases) -> list:
@@ -214,11 +238,14 @@ def case_records(cases) -> list:
 
 
 def write_results(out, result: dict, name: str = "results.json") -> Path:
-    """Write OUT/results.json atomically (a crash never leaves half a file); returns its path."""
+    """Write OUT/results.json atomically (a crash never leaves half a file), as standard JSON (NaN and inf as null);
+    returns its path."""
     from volsmpl.io.outputs import write_atomic
+
+    from .checks import strict_json
 
     path = Path(out) / name
     os.makedirs(path.parent, exist_ok=True)
-    write_atomic(path, json.dumps(result, indent=1))
+    write_atomic(path, json.dumps(strict_json(result), indent=1, allow_nan=False))
     return path
 

@@ -38,7 +38,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     for name, (module, summary) in SUBCOMMANDS.items():
         if command is None or name == command:
             mod = importlib.import_module(module)
-            mod.add_parser(sub).set_defaults(_run=mod.run)
+            p = mod.add_parser(sub)
+            p.set_defaults(_run=mod.run, _parser=p)  # _parser: its defaults tell the options a user gave
         else:
             sub.add_parser(name, help=summary, add_help=False)
     return parser

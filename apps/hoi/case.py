@@ -180,14 +180,14 @@ def case_to_dict(case: HoiCase) -> dict:
 
 def load_case(path) -> HoiCase:
     """Read and validate a case file."""
+    from volsmpl.apps.checks import read_json
+
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"case file {path} not found")
+    d = read_json(path, "case file", "--case")
     try:
-        d = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"case file {path} is not valid JSON ({e})") from e
-    return case_from_dict(d, path.parent)
+        return case_from_dict(d, path.parent)
+    except ValueError as e:
+        raise ValueError(f"{path}: {e}") from None
 
 
 def save_case(case: HoiCase, path) -> None:
@@ -219,7 +219,8 @@ def mesh_file(case: HoiCase) -> Path | None:
     if not p.is_absolute() and case.source is not None:
         p = case.source / p
     if not p.is_file():
-        raise FileNotFoundError(f"case {case.name!r}: object mesh {p} not found")
+        raise FileNotFoundError(f"case {case.name!r}: object mesh {p} not found (a path relative to the case file's "
+                                f"folder, or absolute)")
     return p
 
 

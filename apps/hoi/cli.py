@@ -13,7 +13,6 @@ only the cases without a matching record.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import asdict
 from pathlib import Path
 from types import SimpleNamespace
@@ -21,10 +20,12 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
-from volsmpl.apps.table import (CaseRecords, add_common, check_common, checkpoint_names, envelope, volumes,
-                                write_results)
+from volsmpl.apps.checks import applies, claim_out, number, safe_name, warn
+from volsmpl.apps.table import (CaseRecords, add_common, check_common, check_threads, checkpoint_names, envelope,
+                                flag_cases, print_flagged, volumes, write_results)
 
 from .console import case_line, format_table
+from .plausibility import GOOD
 
 ACTIONS = ("run", "make-db", "fit", "tune")
 
@@ -101,21 +102,86 @@ def summarize(results: list) -> dict:
 
 def _cases(args, split: str, database) -> list:
     """The database cases of `split` that --cases selects; one line naming the fix when there is no database."""
+    from volsmpl.apps.checks import read_json
+
     folder = Path(args.db) if args.db else database.database_folder(args.seed)
     if not (folder / "index.json").is_file():
         raise FileNotFoundError(f"no interaction database in {folder}; build it with `volsmpl hoi make-db"
                                 f"{' --db ' + str(folder) if args.db else ''} --seed {args.seed}`")
-    index = json.loads((folder / "index.json").read_text())
-    cases = select_cases(database.load_database(folder), {c["name"]: c for c in index["cases"]}, split, args.cases)
+    loaded = database.load_database(folder)  # the index checked there
+    index = read_json(folder / "index.json", "the database index", "--db")
+    cases = select_cases(loaded, {c["name"]: c for c in index["cases"]}, split, args.cases)
     if not cases:
         raise ValueError(f"no cases selected (split {split!r}, cases {args.cases!r})")
     return cases
 
 
+#: the options each action reads (volsmpl.apps.checks.applies refuses the others)
+_COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device"}
+_FIT = {"iters", "lr", "w_keypoints", "w_silhouette", "contact_fraction", "contact_huber"}
+USES = {"make-db": {"n", "seed", "db", "threads"},
+        "run": _COMMON | _FIT | {"resume", "render", "cases", "split", "db", "seed", "batch"},
+        "fit": _COMMON | _FIT | {"resume", "render", "case"},
+        "tune": _COMMON | {"iters", "lr", "contact_fraction", "contact_huber", "cases", "split", "db", "seed",
+                           "grid"}}
+
+
+def check_options(args) -> None:
+    """The options of the chosen action, before any work: those it does not read refused, the numbers in range."""
+    applies(args, f"hoi {args.action}", USES[args.action])
+    check_threads(args.threads)
+    if args.action == "make-db":
+        number(args.n, "--n", lo=1, what="cases to make")
+        return
+    number(args.iters, "--iters", lo=1, what="optimisation steps")
+    number(args.lr, "--lr", lo=0, lo_open=True, what="Adam's step size")
+    for flag in ("w_keypoints", "w_silhouette"):
+        number(getattr(args, flag), "--" + flag.replace("_", "-"), lo=0, what="a term's weight")
+    number(args.contact_fraction, "--contact-fraction", lo=0, hi=1, lo_open=True, what="a share of a part's vertices")
+    number(args.contact_huber, "--contact-huber", lo=0, what="metres; 0: squared throughout")
+    number(args.batch, "--batch", lo=1, what="cases optimised together")
+
+
+def check_data(cases: list, body, device: str, warnings: list) -> None:
+    """Each case's data against the body and its image (plausibility.check_case_data), before the networks load:
+    what cannot be right is refused, what is unusual warned about."""
+    from .case import object_mesh, object_template
+    from .plausibility import check_case_data
+
+    for c in cases:
+        with torch.no_grad():
+            v = body(**{k: torch.as_tensor(x)[None].to(device) for k, x in c.body.items()}).vertices[0].cpu().numpy()
+        mesh, _ = object_mesh(c, object_template(c))
+        check_case_data(c, mesh, v, lambda text: warn("hoi", text, warnings))
+
+
 def run(args) -> int:
+    from volsmpl.io.outputs import check_writable
+
+    from volsmpl.apps.hoi import database
+
+    check_options(args)
+    if args.action == "make-db":
+        folder = check_writable(args.db or database.database_folder(args.seed), "dir", "--db")
+        paths = database.make_database(args.n, args.seed, folder)
+        print(f"{len(paths)} cases in {folder}")
+        return 0
+    if args.action == "tune":
+        if args.split not in (None, "tune"):
+            raise ValueError(f"tune fits the database's tuning half: drop --split {args.split}")
+        from .tune import run_tune
+        cases = _cases(args, "tune", database)
+        with claim_out(args.out, "hoi"):
+            return run_tune(args, cases)
+    models, ckpts = check_common(args)
+    with claim_out(args.out, "hoi"):
+        return _run(args, models, ckpts)
+
+
+def _run(args, models: list, ckpts: dict) -> int:
+    """`hoi run` / `hoi fit` on a claimed --out."""
     import volsmpl
     from volsmpl.report import paper
-    from volsmpl.io.outputs import check_writable
     from volsmpl.io.provenance import machine_info
 
     from volsmpl.apps.hoi import database
@@ -123,22 +189,7 @@ def run(args) -> int:
     from .figures import case_panel, summary_plot
     from .fit import FitConfig, Problem, fit_cases
 
-    if args.action == "make-db":
-        if args.n < 1:
-            raise ValueError(f"--n must be >= 1 (cases to make), got {args.n}")
-        folder = check_writable(args.db or database.database_folder(args.seed), "dir", "--db")
-        paths = database.make_database(args.n, args.seed, folder)
-        print(f"{len(paths)} cases in {folder}")
-        return 0
-    if args.batch < 1:
-        raise ValueError(f"--batch must be >= 1 (cases optimised together), got {args.batch}")
-    if args.action == "tune":
-        if args.split not in (None, "tune"):
-            raise ValueError(f"tune fits the database's tuning half: drop --split {args.split}")
-        from .tune import run_tune
-        return run_tune(args, _cases(args, "tune", database))
     split = args.split or "test"
-    models, ckpts = check_common(args)
     out = Path(args.out)
     cfg = FitConfig(iters=args.iters, lr=args.lr, w_keypoints=args.w_keypoints, w_silhouette=args.w_silhouette,
                     contact_fraction=args.contact_fraction, contact_huber=args.contact_huber, device=args.device)
@@ -149,6 +200,8 @@ def run(args) -> int:
     else:
         cases = _cases(args, split, database)
     body = volsmpl.create_body().to(args.device)
+    warnings = []
+    check_data(cases, body, args.device, warnings)
     vols = volumes(body, models, ckpts, args.device)
     config = {**asdict(cfg), "models": models, "checkpoints": checkpoint_names(models, ckpts), "split": split,
               "seed": args.seed, "batch": args.batch, "cases_requested": len(cases),
@@ -166,7 +219,7 @@ def run(args) -> int:
             keys = {c.name: store.key({"config": asdict(cfg), "model": m, "case": case_to_dict(c),
                                        **({"mesh_sha256": digests[c.name]} if digests[c.name] else {}),
                                        **({"batch": args.batch} if args.batch > 1 else {})}, vols[m]) for c in group}
-            recs = {c.name: store.get(f"{c.name}_{m}", keys[c.name]) for c in group}
+            recs = {c.name: store.get(f"{safe_name(c.name)}_{m}", keys[c.name]) for c in group}
             todo = [c for c in group if recs[c.name] is None]
             if todo:
                 whole = len(todo) == len(group)
@@ -174,7 +227,7 @@ def run(args) -> int:
                     problem = problem or Problem(group, body, vols[m], cfg)
                 for c, r in zip(todo, fit_cases(todo, body, vols[m], cfg, problem if whole else None)):
                     recs[c.name] = asdict(r)
-                    store.put(f"{c.name}_{m}", keys[c.name], recs[c.name])
+                    store.put(f"{safe_name(c.name)}_{m}", keys[c.name], recs[c.name])
             for c in group:
                 r = SimpleNamespace(**recs[c.name])
                 per_model[m].append(r)
@@ -183,20 +236,22 @@ def run(args) -> int:
         for j, c in enumerate(group):
             if i0 + j < args.render:
                 problem = problem or Problem(group, body, vols[models[0]], cfg)
-                case_panel(out / f"case_{c.name}.png", problem, results[c.name], j)
+                case_panel(out / f"case_{safe_name(c.name)}.png", problem, results[c.name], j)
         # results so far, after every batch: a long run stopped early still leaves its finished cases
         done = i0 + len(group)
         summary = {m: summarize(rs) for m, rs in per_model.items()}
         figures = {"summary": "summary.png",
-                   **{f"case_{c.name}": f"case_{c.name}.png" for c in cases[: min(done, args.render)]}}
-        result = envelope("hoi", config, summary, paper.rows("hoi"),
-                          {m: [dict(vars(r)) for r in rs] for m, rs in per_model.items()}, machine_info(args.device),
-                          figures)
+                   **{f"case_{c.name}": f"case_{safe_name(c.name)}.png" for c in cases[: min(done, args.render)]}}
+        recs_out = {m: [dict(vars(r)) for r in rs] for m, rs in per_model.items()}
+        flagged = flag_cases(recs_out, "name", GOOD)
+        result = envelope("hoi", config, summary, paper.rows("hoi"), recs_out, machine_info(args.device), figures,
+                          flagged=flagged, warnings=warnings)
         summary_plot(out / "summary.png", summary)
         write_results(out, result)
     note = store.note()
     if note:
         print(note)
     print(format_table(summary))
+    print_flagged(flagged)
     print(f"wrote {out / 'results.json'}")
     return 0

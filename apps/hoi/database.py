@@ -433,7 +433,12 @@ def load_database(folder, split: str | None = None) -> list[HoiCase]:
     index_path = folder / "index.json"
     if not index_path.is_file():
         raise FileNotFoundError(f"{index_path} not found; build the database with make_database(out={str(folder)!r})")
-    d = json.loads(index_path.read_text())
+    from volsmpl.apps.checks import read_json
+
+    d = read_json(index_path, "the database index", "--db")
+    if not isinstance(d, dict) or not isinstance(d.get("cases"), list):
+        raise ValueError(f"{index_path} is not an interaction database index (no 'cases' list); rebuild it with "
+                         f"`volsmpl hoi make-db --db {folder}`")
     cases = []
     for c in d["cases"]:
         if split is None or c.get("split") == split:

@@ -12,6 +12,7 @@ from volsmpl.viz.render import grid, render_camera_view, render_scene, save_png
 from .case import Similarity
 
 BODY, OBJECT, INSIDE = (0.78, 0.78, 0.78), (0.35, 0.55, 0.85), (0.9, 0.1, 0.1)
+NOT_DRAWN = ("diverged", "object_lost")  # fit statuses (plausibility.judge_fit) whose placement is not drawn
 
 
 def case_camera(case):
@@ -55,7 +56,9 @@ def case_panel(path, problem, results: dict, i: int = 0, size: int = 320) -> Non
         images.append(img)
         labels.append("image")
     states = [("first stage", {k: _sim(s) for k, s in case.init.items()})]
-    states += [(f"fit {m}", {"human": r.human, "object": r.object}) for m, r in results.items()]
+    states += [(f"fit {m}", {"human": r.human, "object": r.object}) for m, r in results.items()
+               if getattr(r, "status", None) not in NOT_DRAWN]
+    lost = [f"{m}: {r.status}" for m, r in results.items() if getattr(r, "status", None) in NOT_DRAWN]
     for label, sim in states:
         v, o = _placed(problem, sim, i)
         ins = _inside(problem, sim, i)
@@ -70,6 +73,9 @@ def case_panel(path, problem, results: dict, i: int = 0, size: int = 320) -> Non
         images.append(render_scene([(v, faces, BODY), (o, obj_faces, OBJECT)], size=size,
                                    yaw=90.0, center=centre, points=o[ins], point_colors=INSIDE))
         labels.append(f"{label}, side")
+    if lost:  # a fit that lost its object spans kilometres: named, not drawn
+        images.append(np.full((size, size, 3), 255, np.uint8))
+        labels.append("not drawn: " + ", ".join(lost))
     h = max(im.shape[0] for im in images)
     images = [cv2.resize(im, (int(im.shape[1] * size / h), size)) if im.shape[0] != size else im for im in images]
     w = max(im.shape[1] for im in images)

@@ -30,6 +30,7 @@ from volsmpl.scene import SYMMETRY, rotation_error_deg
 
 from .case import HoiCase, Similarity
 from .losses import keypoint_term, penetration, scale_prior, silhouette_term, to_body_frame, to_camera
+from .plausibility import judge_fit
 from .problem import Problem, object_scale_prior
 
 __all__ = ["FitConfig", "FitResult", "Problem", "fit_case", "fit_cases", "case_metrics", "object_scale_prior"]
@@ -89,7 +90,7 @@ class FitConfig:
 class FitResult:
     name: str
     model: str
-    status: str
+    status: str  # plausibility.judge_fit: 'converged', 'diverged', 'object_lost' or 'worse_than_start'
     iterations: int
     ms_per_iter: float
     total_s: float
@@ -100,6 +101,8 @@ class FitResult:
     after: dict = field(default_factory=dict)  # case_metrics of the fit
     loss: list = field(default_factory=list)  # total loss every 50 steps
     batch: int = 1  # cases optimised together (ms_per_iter and total_s are the batch's divided by it)
+    status_why: str = ""  # the reason of a status other than 'converged'
+    stop: str = ""  # the optimiser's stop rule (volsmpl.optim: 'max_iters', 'converged', ...)
 
 
 def _terms(problem: Problem, volume, cfg: FitConfig) -> dict:
@@ -128,20 +131,29 @@ def fit_cases(cases: list, body, volume, cfg: FitConfig = FitConfig(), problem: 
         raise ValueError("the problem was built for other cases")
     run = optimize(problem.variables([c.init for c in cases]), _terms(problem, volume, cfg),
                    prepare=lambda s: {"placed": problem.placed(s)}, optimizer="adam", lr=cfg.lr,
-                   max_iters=cfg.iters, frozen=[volume], device=cfg.device, progress=None,
+                   max_iters=cfg.iters, frozen=[volume], device=cfg.device, progress=None, usable=problem.usable,
                    desc=cases[0].name if len(cases) == 1 else f"{len(cases)} cases")
     sims = {who: problem.similarity(run.variables, who) for who in ("human", "object")}
     steps, B = run.step_ms(), len(cases)
     results = []
     for i, case in enumerate(cases):
-        fitted = {who: Similarity(float(sc[i]), R[i].double().cpu().numpy(), t[i].double().cpu().numpy())
-                  for who, (sc, R, t) in sims.items()}
+        raw = {who: (float(sc[i]), R[i].double().cpu().numpy(), t[i].double().cpu().numpy())
+               for who, (sc, R, t) in sims.items()}
+        numbers = [x for s_, R_, t_ in raw.values() for x in (s_, *R_.ravel(), *t_)]
+        ends = [run.records[0].total[i], run.records[-1].total[i]] if run.records else []
+        if all(np.isfinite(numbers)):
+            fitted = {who: Similarity(*v) for who, v in raw.items()}
+            before, after = case_metrics(problem, case.init, i), case_metrics(problem, fitted, i)
+        else:  # a diverged fit: no placement to measure
+            fitted, before, after = None, case_metrics(problem, case.init, i), {}
+        status, why = judge_fit(ends, numbers, before, after, run.status[i])
         results.append(FitResult(
-            name=case.name, model=volume.kind, status=run.status[i], iterations=run.iterations[i],
+            name=case.name, model=volume.kind, status=status, iterations=run.iterations[i],
             ms_per_iter=float(np.mean(steps)) / B if steps else float("nan"), total_s=run.seconds / B,
-            peak_mem_mb=run.peak_bytes / 2 ** 20, human=fitted["human"].to_dict(), object=fitted["object"].to_dict(),
-            before=case_metrics(problem, case.init, i), after=case_metrics(problem, fitted, i),
-            loss=[r.total[i] for r in run.records[::50]], batch=B))
+            peak_mem_mb=run.peak_bytes / 2 ** 20,
+            human=(fitted or case.init)["human"].to_dict(), object=(fitted or case.init)["object"].to_dict(),
+            before=before, after=after, loss=[r.total[i] for r in run.records[::50]], batch=B, status_why=why,
+            stop=run.status[i]))
     return results
 
 
@@ -164,7 +176,7 @@ def _within(a: torch.Tensor, b: torch.Tensor, radius: float):
 @torch.no_grad()
 def case_metrics(problem: Problem, sim: dict, i: int = 0) -> dict:
     """Exact metrics of case i's placement {'human': Similarity, 'object': Similarity}: object vertices inside the
-    body (%, exact mesh test), and with ground truth: contact (cm: symmetric Chamfer, mean nearest distance, between
+    body (%, exact mesh test), the gap between the object and the body (cm, 0 when they touch), and with ground truth: contact (cm: symmetric Chamfer, mean nearest distance, between
     the ground-truth contact regions as placed: the body's vertices and the object's surface samples within 2 cm of
     the other surface in the ground truth), object translation (cm, centroid) and rotation (deg) errors, object
     and human scale errors (%)."""
@@ -176,7 +188,8 @@ def case_metrics(problem: Problem, sim: dict, i: int = 0) -> dict:
     body_v, samples = problem.body_v[i:i + 1], problem.obj_samples[i:i + 1]
     x = to_body_frame(to_camera(obj_v, *args(o)), *args(h))
     d = mesh_signed_distance(body_v[0], problem.faces, x[0], closed=True)
-    m = {"collision_pct": float((d < 0).float().mean() * 100)}
+    # gap_cm: the object's nearest vertex from the body's surface (0 when it touches or enters it)
+    m = {"collision_pct": float((d < 0).float().mean() * 100), "gap_cm": float(d.min().clamp(min=0) * 100)}
     case = problem.cases[i]
     truth = case.truth
     if truth is None:

@@ -183,6 +183,15 @@ class Problem:
         R = rotation_6d_to_matrix(state[f"{who}_rot6d"])
         return scale, R, (state[f"{who}_transl"] - (R @ self.centre[who][..., None])[..., 0]) * scale[:, None]
 
+    def usable(self, variables: dict) -> torch.Tensor:
+        """(B,) bool: the cases whose similarities and object vertices in the body frame are finite: what the
+        harness lets on (volsmpl.optim.optimize's `usable`; a log-scale past ~88 overflows float32)."""
+        human, obj = self.similarity(variables, "human"), self.similarity(variables, "object")
+        ok = torch.ones(self.batch, dtype=torch.bool, device=self.K.device)
+        for x in (*human, *obj, to_camera(self.obj_v, *relative_similarity(human, obj))):
+            ok &= torch.isfinite(x.reshape(self.batch, -1)).all(dim=1)
+        return ok
+
     def placed(self, state) -> dict:
         """The geometry at the state's similarities: the object's vertices in the body frame ('obj_body') and the
         contact terms there (B,), the object's silhouette vertices and the body joints in the camera frame."""

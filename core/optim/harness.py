@@ -141,8 +141,13 @@ def _progress(enabled, total: int, desc: str | None):
 
 def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, optimizer="adam", lr: float = 1e-2,
              schedule: Callable[[int], float] | None = None, max_iters: int = 100, stops=(), frozen=(),
-             device=None, progress: bool | None = None, desc: str | None = None) -> OptimResult:
+             device=None, progress: bool | None = None, desc: str | None = None,
+             usable: Callable[[dict], torch.Tensor] | None = None) -> OptimResult:
     """Minimise sum_t weight_t * term_t over the variables (module docstring).
+
+    A problem whose total loss is not finite, or whose variables after an update are not usable (default: not
+    finite), stops with status 'diverged' and keeps its values from before the update that broke it; the others
+    go on.
 
     Args:
         variables: name -> Variable or tensor (B, ...); the tensors are copied, the caller's stay untouched.
@@ -154,6 +159,8 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
         frozen: modules whose parameters get no gradient during the run (restored after).
         device: where time and memory are measured (default: the first variable's device).
         progress: tqdm bar (None: only on a terminal and for runs of 50 iterations or more).
+        usable: variables {name: (B, ...)} -> (B,) bool, the problems whose values the next evaluation can take
+            (e.g. a log-scale whose exp is finite); default: every value finite.
     Returns: OptimResult.
     """
     if not variables:
@@ -192,6 +199,8 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
     status, iterations = [None] * batch, [0] * batch
     active = torch.ones(batch, dtype=torch.bool, device=dev)
     records = []
+    prev = None  # the variables before the last update: what a problem that diverges keeps
+    usable = usable or _finite_rows
     flags = [(p, p.requires_grad) for m in frozen for p in m.parameters()]
     bar = _progress(progress, cap, desc)
     try:
@@ -211,6 +220,10 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
                     values[n] = _per_problem(r, n, batch)
                 total = sum(terms_[n].weight * v for n, v in values.items())
                 ev = Evaluation(it, {n: v.detach() for n, v in values.items()}, total.detach(), info, batch, dev)
+                # a loss that is not finite: the problem stops, set back (after the backward, which still holds its
+                # values) to the values before the update that did it
+                lost = active & ~torch.isfinite(ev.total)
+                active &= ~lost
                 for rule in rules:
                     hit = torch.as_tensor(rule.check(ev), dtype=torch.bool, device=dev).expand(batch) & active
                     for b in hit.nonzero()[:, 0].tolist():
@@ -225,11 +238,20 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
                     if sched is not None:
                         sched.step()
                     _limit_and_keep(params, old, vars_, active)
-                    for n, p in params.items():
-                        if not torch.isfinite(p.detach()).all():
-                            raise RuntimeError(f"variable '{n}' became NaN or Inf at iteration {it}; lower the learning rate")
+                    with torch.no_grad():
+                        broken = active & ~torch.as_tensor(usable({n: p.detach() for n, p in params.items()}),
+                                                           dtype=torch.bool, device=dev).expand(batch)
+                    if broken.any():
+                        _diverge(params, old, broken, status)
+                        active &= ~broken
                     for b in active.nonzero()[:, 0].tolist():
                         iterations[b] += 1
+                if lost.any():
+                    _diverge(params, prev, lost, status)
+                    for b in lost.nonzero()[:, 0].tolist():  # the update it is set back from does not count
+                        iterations[b] -= 1 if prev is not None else 0
+                if updated:
+                    prev = old
                 sync(dev)
                 records.append(StepRecord(it, {n: v.tolist() for n, v in ev.terms.items()}, ev.total.tolist(), info,
                                           updated, (time.perf_counter() - t0) * 1e3))
@@ -245,6 +267,21 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
             bar.close()
     return OptimResult({n: p.detach() for n, p in params.items()}, status, iterations, records, meter.seconds,
                        meter.peak_bytes, meter.kind)
+
+
+def _finite_rows(variables: dict) -> torch.Tensor:
+    """(B,) bool: the problems whose every variable value is finite."""
+    return torch.stack([torch.isfinite(v.reshape(v.shape[0], -1)).all(dim=1) for v in variables.values()]).all(dim=0)
+
+
+@torch.no_grad()
+def _diverge(params: dict, before: dict | None, rows: torch.Tensor, status: list) -> None:
+    """Problems `rows` (B,) stop as 'diverged', their variables set back to `before` (when there is one)."""
+    for b in rows.nonzero()[:, 0].tolist():
+        status[b] = "diverged"
+    if before is not None:
+        for n, p in params.items():
+            p[rows] = before[n][rows]
 
 
 @torch.no_grad()
