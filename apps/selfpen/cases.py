@@ -197,14 +197,13 @@ def case_from_dict(d: dict, where: str = "case") -> Case:
 
 def load_cases(path: str | Path = CASES_FILE, names: list[str] | None = None) -> list[Case]:
     """Read and validate a case file ({"cases": [...]} or a bare list); optionally keep only `names` (in that order)."""
+    from volsmpl.apps.checks import read_json
+
     path = Path(path)
-    if not path.exists():
+    if path == CASES_FILE and not path.exists():
         raise FileNotFoundError(f"case file not found: {path} (regenerate the default one with "
                                 f"`python -m volsmpl.apps.selfpen.cases`)")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{path}: not valid JSON ({e})") from None
+    data = read_json(path, "case file", "--case-file")
     items = data.get("cases") if isinstance(data, dict) else data
     if not isinstance(items, list) or not items:
         raise ValueError(f"{path}: expected a non-empty list of cases (or {{\"cases\": [...]}})")

@@ -18,11 +18,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from volsmpl.apps.table import (add_common, check_common, checkpoint_names, CaseRecords, envelope, volumes,
-                                write_results)
+from volsmpl.apps.checks import applies, claim_out, number, safe_name
+from volsmpl.apps.table import (add_common, check_common, checkpoint_names, CaseRecords, envelope, flag_cases,
+                                print_flagged, volumes, write_results)
 
 from .cases import CASES_FILE, load_cases
-from .optimize import PAPER, PRESETS, RepairResult, SelfPenConfig, format_table, repair_case, summarize
+from .optimize import (GOOD, PAPER, PRESETS, RepairResult, SelfPenConfig, format_table, repair_case,
+                       summarize)
 
 HIGHLIGHT, GREY = (0.9, 0.1, 0.1), (0.75, 0.75, 0.75)
 ACTIONS = ("run", "tune")
@@ -105,6 +107,30 @@ def render_case(path, faces: np.ndarray, results: dict, size: int = 320) -> None
     save_png(path, grid(images, labels, cols=len(panels)))
 
 
+#: the options each action reads (volsmpl.apps.checks.applies refuses the others)
+_COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device", "cases", "case_file"}
+USES = {"run": _COMMON | {"resume", "render", "random_init", "preset", "lr", "max_iters", "w_selfpen", "w_prior",
+                          "n_points", "stop_checks", "tau", "patience", "stall_rtol", "max_step", "code_grad",
+                          "sampler_seed"},
+        "tune": _COMMON | {"max_iters", "stop_checks", "tau", "patience", "grid_lr", "grid_w_selfpen", "grid_w_prior",
+                           "combine"}}
+
+
+def check_options(args) -> None:
+    """The options of the chosen action, before any work: those it does not read refused, the numbers in range."""
+    applies(args, f"selfpen {args.action}", USES[args.action])
+    for flag, lo, lo_open in (("lr", 0, True), ("w_selfpen", 0, False), ("w_prior", 0, False), ("tau", 0, True),
+                              ("stall_rtol", 0, False), ("max_step", 0, False), ("patience", 0, False),
+                              ("stop_checks", 1, False)):
+        if getattr(args, flag) is not None:
+            number(getattr(args, flag), "--" + flag.replace("_", "-"), lo=lo, lo_open=lo_open)
+    number(args.max_iters, "--max-iters", lo=1, what="optimisation steps")
+    number(args.n_points, "--n-points", lo=1, what="samples per box")
+    for flag in ("grid_lr", "grid_w_selfpen", "grid_w_prior"):
+        for v in getattr(args, flag):
+            number(v, "--" + flag.replace("_", "-"), lo=0, lo_open=flag == "grid_lr")
+
+
 def _config(args) -> SelfPenConfig:
     given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks", "tau", "patience",
                                            "stall_rtol", "max_step") if getattr(args, k) is not None}
@@ -117,6 +143,7 @@ def _config(args) -> SelfPenConfig:
 def run(args) -> int:
     import volsmpl
 
+    check_options(args)
     if args.action == "tune" and args.combine:
         from .tune import run_combine
         return run_combine(args)
@@ -130,18 +157,28 @@ def run(args) -> int:
             raise ValueError("tune sweeps the learned kinds' settings: give --model volsmpl,coap (not mesh)")
     cfg = _config(args)
     cases = load_cases(args.case_file, _case_names(args.cases))
-    body = volsmpl.create_body().to(cfg.device)
-    vols = volumes(body, models, ckpts, cfg.device, random_init=args.random_init)   # a missing checkpoint fails here
-    if args.action == "tune":
-        from .tune import run_tune
-        return run_tune(args, body, vols, cases, checkpoint_names(models, ckpts))
+    with claim_out(args.out, "selfpen"):
+        body = volsmpl.create_body().to(cfg.device)
+        vols = volumes(body, models, ckpts, cfg.device, random_init=args.random_init)
+        if args.action == "tune":
+            from .tune import run_tune
+            return run_tune(args, body, vols, cases, checkpoint_names(models, ckpts))
+        return _repair(args, cfg, body, vols, cases, models, ckpts)
+
+
+def _repair(args, cfg, body, vols: dict, cases: list, models: list, ckpts: dict) -> int:
+    """`selfpen run` on a claimed --out: each case by each kind; results.json after every case."""
     if args.random_init:
         print("note: --random-init: untrained networks, the numbers only check the pipeline")
+    config = {**asdict(cfg), "preset": args.preset, "models": models, "random_init": bool(args.random_init),
+              "checkpoints": checkpoint_names(models, ckpts, args.random_init), "case_file": str(args.case_file),
+              "device_name": torch.cuda.get_device_name(0) if cfg.device == "cuda" else "cpu",
+              "threads": torch.get_num_threads()}
     store = CaseRecords(args.out, "selfpen", resume=args.resume)
     per_model = {m: [] for m in models}
     figures = {}
     for case in cases:
-        results, computed = {}, True
+        results = {}
         for m in models:
             draw = len(figures) < args.render
             spec = {"config": asdict(cfg), "model": m, "random_init": bool(args.random_init),
@@ -154,9 +191,8 @@ def run(args) -> int:
                 kept["result"] = r
                 return r.to_json()
 
-            rec, reused = store.get_or_make(f"{case.name}_{m}", spec, vols[m], make)
+            rec, reused = store.get_or_make(f"{safe_name(case.name)}_{m}", spec, vols[m], make)
             r = kept.get("result") or RepairResult(**rec)
-            computed = computed and not reused
             per_model[m].append(r)
             results[m] = r
             tail = "  (reused)" if reused else ""
@@ -167,25 +203,29 @@ def run(args) -> int:
                       f"{r.collisions_after:5d} (collidable parts {r.collidable_before} -> {r.collidable_after})  "
                       f"pose change {r.pose_change_deg:6.2f} deg  {r.total_s:6.2f} s{tail}")
         if len(figures) < args.render and all(r.vertices_before is not None for r in results.values()):
-            render_case(Path(args.out) / f"render_{case.name}.png", body.faces, results)
-            figures[case.name] = f"render_{case.name}.png"
+            render_case(Path(args.out) / f"render_{safe_name(case.name)}.png", body.faces, results)
+            figures[case.name] = f"render_{safe_name(case.name)}.png"
+        path, flagged = _write(args.out, config, per_model, figures, cfg.device)  # a stopped run keeps its cases
     summaries = {m: summarize(rs) for m, rs in per_model.items()}
     print()
     print(format_table(summaries))
     print("collisions: pose-induced intersecting triangle pairs (rest-pose pairs of the same shape left out), "
           "mean over cases; collidable parts: those of them between two parts the self-penetration loss may push "
           "apart (not the same part, not neighbours or ignored pairs); memory: " + ", ".join(sorted({s['memory_kind'] for s in summaries.values() if s['memory_kind']})))
-    config = {**asdict(cfg), "preset": args.preset, "models": models, "random_init": bool(args.random_init),
-              "checkpoints": checkpoint_names(models, ckpts, args.random_init), "case_file": str(args.case_file),
-              "device_name": torch.cuda.get_device_name(0) if cfg.device == "cuda" else "cpu",
-              "threads": torch.get_num_threads()}
-    from volsmpl.io.provenance import machine_info
-
-    result = envelope("selfpen", config, summaries, PAPER, {m: [r.to_json() for r in rs] for m, rs in per_model.items()},
-                      machine_info(cfg.device), figures)
-    path = write_results(args.out, result)
+    print_flagged(flagged)
     note = store.note()
     if note:
         print(note)
     print(f"wrote {path}" + (f" and {len(figures)} figure(s)" if figures else ""))
     return 0
+
+
+def _write(out, config: dict, per_model: dict, figures: dict, device: str):
+    """OUT/results.json of the cases done so far: (its path, the flagged repairs)."""
+    from volsmpl.io.provenance import machine_info
+
+    recs = {m: [r.to_json() for r in rs] for m, rs in per_model.items()}
+    flagged = flag_cases(recs, "name", GOOD)
+    result = envelope("selfpen", config, {m: summarize(rs) for m, rs in per_model.items()}, PAPER, recs,
+                      machine_info(device), figures, flagged=flagged)
+    return write_results(out, result), flagged

@@ -44,6 +44,10 @@ PAPER = paper.rows("selfpen")
 # bodies: one step could move the spine by tens of degrees), lr * w_selfpen 0.03 (the best mean of 1e-3 .. 0.3 for both
 # models: 0.1 with the COAP shipped before its catch-up, 0.03 since), 3 empty draws to stop, a stall stop after 10 steps without a new low (10 % below the best), and no backward
 # pass through the part encoder (code_grad False, Volume.selfpen_loss), all for both models alike.
+#: the statuses of a repair that worked or left the body as it was, and of one that failed (RepairResult)
+GOOD = ("no_intersection", "no_volume_points", "resolved", "stalled", "max_iters")
+FLAGGED = ("diverged", "worse_than_start")
+
 PRESETS = {
     "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1, "tau": 1.0, "patience": 0, "stall_rtol": 0.0,
               "code_grad": True, "max_step": 0.0},
@@ -106,7 +110,9 @@ class RepairResult:
     """Outcome of one case. status: 'no_intersection' (no triangle collision: left unchanged),
     'no_volume_points' (the volume finds no penetration: left unchanged), 'resolved' (the volume
     finds no penetration after `iterations` steps), 'stalled' (the penetration term found no new low for
-    `patience` steps) or 'max_iters'."""
+    `patience` steps), 'max_iters', and the two of a repair that failed (`FLAGGED`, why in `status_why`):
+    'diverged' (a step made the pose or the loss non-finite; the pose before it is kept) and 'worse_than_start'
+    (more pose-induced colliding triangle pairs after than before)."""
 
     name: str
     status: str
@@ -128,6 +134,7 @@ class RepairResult:
     loss: list = field(default_factory=list)  # total loss per step
     points: list = field(default_factory=list)  # penetration samples per evaluation
     body_pose: list = field(default_factory=list)  # final (69,)
+    status_why: str = ""  # the reason of a status in FLAGGED
     pairs_before: np.ndarray | None = field(default=None, repr=False)
     pairs_after: np.ndarray | None = field(default=None, repr=False)
     vertices_before: np.ndarray | None = field(default=None, repr=False)
@@ -187,6 +194,12 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
     res.collidable_after = count_collidable(after["pairs"], fl, cm)
     res.pose_change_deg = pose_change_deg(case.body_pose, final_pose)
     res.body_pose = final_pose.tolist()
+    if res.status == "diverged":
+        res.status_why = "a step made the pose or the loss non-finite (kept: the pose before it); lower --lr"
+    elif res.collisions_after > res.collisions_before:
+        res.status_why = (f"colliding triangle pairs {res.collisions_before} -> {res.collisions_after} (the "
+                          f"optimiser stopped as {res.status!r})")
+        res.status = "worse_than_start"
     if keep_meshes:
         res.pairs_before, res.vertices_before = before["pairs"], before["vertices"]
         res.pairs_after, res.vertices_after = after["pairs"], after["vertices"]
