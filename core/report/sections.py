@@ -133,6 +133,24 @@ def n_cases(data: dict) -> int | None:
     return None
 
 
+def flagged_note(data: dict) -> list[str]:
+    """The cases the app judged probably wrong (results.json `flagged`: diverged, object lost, worse than start,
+    ...), counted by back-end and status; nothing for a result without the list (made before apps judged their
+    cases)."""
+    flagged = data.get("flagged")
+    if not isinstance(flagged, list):
+        return []
+    if not flagged:
+        return ["", "Flagged by the app's own judge (no ground truth): none."]
+    counts = {}
+    for f in flagged:
+        key = (str(f.get("model")), str(f.get("status")))
+        counts[key] = counts.get(key, 0) + 1
+    parts = [f"{m} {st} {n}" for (m, st), n in sorted(counts.items())]
+    return ["", f"Flagged by the app's own judge (no ground truth): {len(flagged)} case record(s): "
+                + ", ".join(parts) + " (`flagged` in the result)."]
+
+
 # ---------------------------------------------------------------------------------------------------------- builders
 
 def eval_section(ctx) -> list[str]:
@@ -247,7 +265,7 @@ def selfpen_section(ctx) -> list[str]:
         ran = {k: (d.get("config") or {}).get(k) for k in best}
         out += ["", f"Tuning run: {len(tune.get('rows') or [])} settings over {len(tune.get('cases') or [])} cases; "
                     f"best {best}" + ("." if ran == best else f"; the table above ran {ran} (its preset).")]
-    return out
+    return out + flagged_note(d)
 
 
 def summary_section(ctx) -> list[str]:
@@ -273,7 +291,7 @@ def summary_section(ctx) -> list[str]:
     n = n_cases(d)
     if n is not None:
         out += ["", f"{n} per-case records in the result (`cases`)."]
-    return out
+    return out + flagged_note(d)
 
 
 def paired_table(p) -> list[str]:
