@@ -162,8 +162,11 @@ def run(args) -> int:
 
     check_options(args)
     if args.action == "make-db":
+        from volsmpl.io.outputs import exclusive_folder
+
         folder = check_writable(args.db or database.database_folder(args.seed), "dir", "--db")
-        paths = database.make_database(args.n, args.seed, folder)
+        with exclusive_folder(folder, "volsmpl hoi make-db"):
+            paths = database.make_database(args.n, args.seed, folder)
         print(f"{len(paths)} cases in {folder}")
         return 0
     if args.action == "tune":
