@@ -26,14 +26,17 @@ from volsmpl.cli import main as cli_main
     (["--combine", "a.json"], "--combine does not apply to `volsmpl selfpen run`"),
 ])
 def test_wrong_options_are_refused_in_one_line(tmp_path, capsys, extra, message):
-    assert cli_main(["selfpen", "--model", "mesh", "--out", str(tmp_path / "o")] + extra) == 2
+    # the case file does not exist: an option not checked would end there instead, at once
+    assert cli_main(["selfpen", "--model", "mesh", "--case-file", str(tmp_path / "none.json"),
+                     "--out", str(tmp_path / "o")] + extra) == 2
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()  # refused before anything was made
 
 
 def test_tune_refuses_the_run_options(tmp_path, capsys):
-    assert cli_main(["selfpen", "tune", "--model", "volsmpl", "--w-prior", "10", "--out", str(tmp_path)]) == 2
+    assert cli_main(["selfpen", "tune", "--model", "volsmpl", "--w-prior", "10", "--case-file",
+                     str(tmp_path / "none.json"), "--out", str(tmp_path)]) == 2
     assert "--w-prior does not apply to `volsmpl selfpen tune`" in capsys.readouterr().err
 
 
