@@ -19,26 +19,33 @@ rooms (a third of the sweep's cost; its rows <model> are the test rooms').
 
 Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<model>, <model>_w<w> and <model>_test, the
 paper's rows, per-sequence records per kind, figures, meta; then `tuning`, `cost` and `paired`: the compared rows' per-sequence differences with bootstrap intervals, stats.py),
-OUT/topdown_<scene>.png and OUT/strip_<scene>_<k>_<model>.png for the first --render sequences.
+OUT/topdown_<scene>.png and OUT/strip_<scene>_<k>_<model>.png for the first --render sequences. results.json is
+written after every finished sequence (its `progress` says how many of the planned ones it holds), and each
+sequence's record is kept in OUT/cases/ for --resume.
+
+Each sequence record gets a status judged without ground truth (status.py: reached, diverged, goal_missed,
+colliding, worse_than_start) and its reason; results.json's `flagged` lists those not reached (printed after the
+table), its `warnings` what looked unusual in a user's scene (scene_checks.py: size against --units, up axis).
+Every option is checked before any work (options.py: the options a mode does not read are refused), a user's scene
+right after reading it, before the networks load.
 """
 from __future__ import annotations
 
 import hashlib
-import math
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from volsmpl.apps.checks import claim_out, warn
 from volsmpl.apps.table import add_common
 
+from .options import ALL_SCENES, PAPER_W, check_options, parse_weights, parse_xy, scene_count  # noqa: F401
 from .stats import compared_runs, format_pairs, paired_differences
 from .summary import cost_columns, fit_budget, format_table, paper_summary, tuned_rows, tuned_summary, wkey
 from .tuning import choose_weights, split_scenes
 
-PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
-ALL_SCENES = 15
 PUBLISHED = "coap_published"   # summary/cost key of COAP as published (--published-cost)
 
 
@@ -54,18 +61,21 @@ def add_parser(sub):
     add_common(p, out="out/motion", render=1, seed="the first generated room's seed",
                resume="reuse the sequences OUT/cases/ already holds from an identical run (same code, weights, "
                       "settings and inputs); the others are computed")
-    p.add_argument("--scenes", default="2", help="'all' (15 generated rooms) or a number of rooms")
-    p.add_argument("--sequences", type=int, default=8, help="start/goal pairs per room (default 8)")
+    p.add_argument("--scenes", default="2", help="without --scene: 'all' (15 generated rooms) or a number of rooms")
+    p.add_argument("--sequences", type=int, default=8, help="without --scene: start/goal pairs per room (default 8)")
     p.add_argument("--scene", default=None, help="your own scene: a mesh or point cloud file (instead of rooms)")
     p.add_argument("--start", default=None, help="with --scene: start floor position A,B (negative: --start=-1,2; the file's horizontal "
                                                  "axes in order, its units)")
     p.add_argument("--goal", default=None, help="with --scene: goal floor position A,B")
-    p.add_argument("--up", default="y", choices=["y", "z"], help="with --scene: the file's up axis")
+    p.add_argument("--up", default="y", choices=["y", "z"], help="with --scene: the file's up axis (checked against "
+                   "the floor found in the points)")
     p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="with --scene: the file's units")
     p.add_argument("--floor-y", type=float, default=None,
-                   help="with --scene: floor height in metres after conversion (default: 1st percentile)")
+                   help="with --scene: floor height in metres after conversion (default: 1st percentile); given, a "
+                        "floor that seems to lie across another axis than --up is a warning, not a refusal")
     p.add_argument("--frames", type=int, default=80, help="frames per sequence (paper 80-120)")
-    p.add_argument("--iters", type=int, default=100, help="Adam steps (paper 100)")
+    p.add_argument("--iters", type=int, default=100,
+                   help="Adam steps (paper 100; 0: the straight start walk, not optimised: the cost columns only)")
     p.add_argument("--lr", type=float, default=0.05, help="Adam learning rate, linearly decayed (paper 0.05)")
     p.add_argument("--w", action="append", default=[], metavar="MODEL=W[,W...]",
                    help="collision weights of a model, e.g. --w coap=0.1 (default volsmpl=1, mesh=1, "
@@ -88,100 +98,56 @@ def add_parser(sub):
                         "bfloat16 autocast, both kinds alike: ~1.7x faster per frame on a CPU with AVX512-BF16 or AMX "
                         "(emulated, not timed, on one without), codes rounded (docs/history/readme.md); default float32")
     p.add_argument("--batch", type=int, default=1,
-                   help="optimise up to N start/goal pairs of a room together (one harness run; each walk its own "
-                        "objective): fills a GPU; 1 (default) keeps the per-sequence time and memory columns")
+                   help="without --scene: optimise up to N start/goal pairs of a room together (one harness run; "
+                        "each walk its own objective): fills a GPU; 1 (default) keeps the per-sequence time and "
+                        "memory columns")
     return p
 
 
-def parse_xy(text, name: str):
-    if text is None:
-        raise ValueError(f"--scene needs --start and --goal (A,B floor positions); {name} is missing")
-    try:
-        a, b = (float(v) for v in str(text).split(","))
-    except ValueError:
-        raise ValueError(f"{name} must be two numbers A,B, got {text!r}") from None
-    if not (math.isfinite(a) and math.isfinite(b)):
-        raise ValueError(f"{name} must be finite, got {text!r}")
-    return a, b
-
-
-def parse_weights(items, models) -> dict:
-    out = {m: list(PAPER_W.get(m, [1.0])) for m in models}
-    for it in items:
-        if "=" not in it:
-            raise ValueError(f"--w takes MODEL=W[,W...], got {it!r}")
-        m, ws = it.split("=", 1)
-        m = m.strip()
-        if m not in out:
-            raise ValueError(f"--w {it!r}: model {m!r} is not in --model ({', '.join(models)})")
-        try:
-            vals = [float(v) for v in ws.split(",") if v.strip()]
-        except ValueError:
-            raise ValueError(f"--w {it!r}: weights must be numbers") from None
-        if not vals or any(not math.isfinite(v) or v < 0 for v in vals):
-            raise ValueError(f"--w {it!r}: weights must be finite and >= 0")
-        out[m] = vals
-    return out
-
-
-def _print_case(scene: str, k: int, label: str, met: dict, reused: bool = False) -> None:
-    print(f"{scene:8s} seq {k} {label:12s} goal {met['goal_dist_m']:.3f} m  collision {met['collision_cm']:.3f} cm "
-          f"({met['collision_frames_pct']:.0f}% frames)  skate {met['foot_skate_cm']:.3f} cm  {met['optim_s']:.0f} s"
+def _print_case(scene: str, k: int, label: str, rec: dict, reused: bool = False) -> None:
+    met, status = rec["metrics"], rec.get("status", "reached")
+    if met.get("error"):
+        line = f"no walk: {met['error']}"
+    else:
+        line = (f"goal {met['goal_dist_m']:.3f} m  collision {met['collision_cm']:.3f} cm "
+                f"({met['collision_frames_pct']:.0f}% frames)  skate {met['foot_skate_cm']:.3f} cm  "
+                f"{met['optim_s']:.0f} s")
+    print(f"{scene:8s} seq {k} {label:12s} {line}" + ("" if status == "reached" else f"  [{status}]")
           + ("  (reused)" if reused else ""), flush=True)
 
 
-def _checked(args) -> dict:
-    """Every option checked before any work: kinds, checkpoints, weights, frames, budgets, the protocol."""
-    from volsmpl.apps.table import check_common
-    from volsmpl.volume.models import model_kind
-
-    from .synth import check_frames
-
-    models, ckpts = check_common(args)
-    protocol = "tuned" if args.action == "tune" else "paper"
-    weights = parse_weights(args.w, models)
-    frames = check_frames(args.frames)
-    if args.iters < 0:
-        raise ValueError(f"--iters must be >= 0, got {args.iters}")
-    if args.batch < 1:
-        raise ValueError(f"--batch must be >= 1, got {args.batch}")
-    if args.sequences < 1:
-        raise ValueError(f"--sequences must be >= 1, got {args.sequences}")
-    if args.mem_budget_gb <= 0:
-        raise ValueError(f"--mem-budget-gb must be > 0, got {args.mem_budget_gb}")
-    cf = str(args.coll_frames).strip().lower()
-    if cf not in ("auto", "all") and not (cf.isdigit() and int(cf) >= 1):
-        raise ValueError(f"--coll-frames must be 'auto', 'all' or a number >= 1, got {args.coll_frames!r}")
-    if protocol == "tuned" and (args.scene is not None or str(args.scenes).strip().lower() != "all"
-                                and int(args.scenes) < 2):
-        raise ValueError("tune splits generated rooms into tuning and test rooms: use --scenes 2 or more "
-                         "(not --scene)")
-    if args.encoder_bf16 and not any(model_kind(m).learned for m in models):
-        raise ValueError(f"--encoder-bf16 sets the learned kinds' encoder arithmetic, but --model {','.join(models)} "
-                         f"runs none: add volsmpl or coap, or drop the flag")
-    if args.published_cost and "coap" not in models:
-        raise ValueError("--published-cost measures COAP as published: add coap to --model")
-    return {"models": models, "ckpts": ckpts, "protocol": protocol, "weights": weights, "frames": frames, "cf": cf}
-
-
-def _scenes(args, frames: int) -> list:
-    """The user's scene with its start and goal (checked: units, floor, obstacles), or the generated rooms."""
+def _scenes(args, frames: int, warnings: list) -> list:
+    """The user's scene with its start and goal (checked: size, up axis, floor, obstacles), or the generated rooms."""
     from .scenes import check_endpoint, check_pair, floor_xz, load_scene, room_scenes
 
     if args.scene is not None:
-        sc = load_scene(args.scene, up=args.up, units=args.units, floor_y=args.floor_y)
+        sc = load_scene(args.scene, up=args.up, units=args.units, floor_y=args.floor_y,
+                        warn=lambda text: warn("motion", text, warnings))
         s = floor_xz(parse_xy(args.start, "--start"), args.up, args.units)
         g = floor_xz(parse_xy(args.goal, "--goal"), args.up, args.units)
         check_pair(sc, s, g, frames, args.units)   # first: a scene in the wrong units shows here (its message says so)
         s, g = check_endpoint(sc, s, "--start"), check_endpoint(sc, g, "--goal")
         sc.pairs = [(s, g)]
         return [sc]
-    if args.start is not None or args.goal is not None:
-        raise ValueError("--start/--goal need --scene (generated rooms draw their own pairs)")
-    n = ALL_SCENES if str(args.scenes).strip().lower() == "all" else int(args.scenes)
-    if n < 1:
-        raise ValueError(f"--scenes must be 'all' or >= 1, got {args.scenes}")
-    return room_scenes(n, args.sequences, frames, first_seed=args.seed)
+    return room_scenes(scene_count(args.scenes), args.sequences, frames, first_seed=args.seed)
+
+
+def _walks(model, volume, sc, ks: list, w: float, cfg) -> list:
+    """synthesize_batch on the pairs `ks` of scene `sc`. A walk the harness stops as diverged keeps its last finite
+    values (status.judge flags it); an error raised inside a step on NaN/Inf values makes a result without a walk
+    (status.failed_metrics) instead of ending the run; in a batch, its pairs are walked again one by one so that
+    only the one that failed is lost."""
+    from .status import failed_metrics
+    from .synth import synthesize_batch
+
+    try:
+        return synthesize_batch(model, volume, sc, [sc.pairs[k] for k in ks], w, cfg)
+    except RuntimeError as e:
+        if "NaN or Inf" not in str(e):
+            raise
+        if len(ks) > 1:
+            return [r for k in ks for r in _walks(model, volume, sc, [k], w, cfg)]
+        return [{"walk": None, "metrics": failed_metrics(f"the optimisation stopped: {e}")}]
 
 
 def _costs(args, body, model, vols: dict, scenes: list, opt: dict) -> tuple[dict, dict]:
@@ -217,19 +183,28 @@ def _costs(args, body, model, vols: dict, scenes: list, opt: dict) -> tuple[dict
 
 
 def run(args) -> int:
+    opt = check_options(args)   # every option, before any work
+    with claim_out(args.out, "motion"):   # one writer of OUT; another app's results.json is refused
+        return _run(args, opt)
+
+
+def _run(args, opt: dict) -> int:
+    """`volsmpl motion` on a claimed --out, its options checked."""
     import volsmpl
-    from volsmpl.apps.table import CaseRecords, checkpoint_names, envelope, volumes, write_results
+    from volsmpl.apps.table import (CaseRecords, checkpoint_names, envelope, flag_cases, print_flagged, volumes,
+                                    write_results)
     from volsmpl.io.provenance import machine_info
     from volsmpl.report import paper
 
     from volsmpl.apps.motion import walk as W
     from .figures import topdown
-    from .synth import SynthConfig, synthesize_batch
+    from .status import GOOD, judge
+    from .synth import SynthConfig
 
-    opt = _checked(args)
     models, ckpts, protocol, weights, frames = (opt[k] for k in ("models", "ckpts", "protocol", "weights", "frames"))
     out = Path(args.out)
-    scenes = _scenes(args, frames)
+    warnings = []
+    scenes = _scenes(args, frames, warnings)   # a user's scene checked here, before the networks load
     body = volsmpl.create_body().to(args.device)
     model = W.WalkModel(body)
     vols = volumes(body, models, ckpts, args.device, encoder_bf16=args.encoder_bf16)  # bf16: in every key
@@ -237,6 +212,34 @@ def run(args) -> int:
     records = {(m, w): [] for m in models for w in weights[m]}
     cases, figures = {}, {}
     store = CaseRecords(out, "motion", resume=args.resume)
+    every = [(m, w) for m in models for w in weights[m]]
+    if protocol == "tuned":
+        tune, test = split_scenes([sc.name for sc in scenes])
+        planned = sum(len(sc.pairs) * (len(every) if sc.name in tune else len(models)) for sc in scenes)
+    else:
+        planned = sum(len(sc.pairs) for sc in scenes) * len(every)
+    config = {"models": models, "weights": weights, "frames": frames, "iters": args.iters, "lr": args.lr,
+              "scenes": [sc.name for sc in scenes], "sequences": args.sequences if args.scene is None else 1,
+              "coll_frames": coll_frames, "mem_budget_gb": args.mem_budget_gb, "residuals": args.residuals,
+              "floor_in_loss": args.floor_in_loss, "user_scene": args.scene, "device": args.device,
+              "checkpoints": checkpoint_names(models, ckpts), "batch": args.batch, "protocol": protocol,
+              "encoder_bf16": args.encoder_bf16, "seed": args.seed, "threads": torch.get_num_threads(),
+              "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
+                           "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"}
+    if args.scene is not None:
+        config.update(up=args.up, units=args.units, floor_y=args.floor_y)
+
+    def result(summary: dict, **extra) -> dict:
+        """results.json as it stands: the records so far, their flags, the warnings, the progress."""
+        done = sum(len(v) for v in records.values())
+        return envelope("motion", config, summary, {**paper.rows("motion"), **paper.rows("coll_weights")}, cases,
+                        machine_info(args.device), figures, flagged=flag_cases(cases, "case", GOOD),
+                        warnings=warnings, progress={"sequences": done, "planned": planned}, **extra)
+
+    def save_partial() -> None:
+        """results.json after a finished sequence: a run stopped at any moment leaves what it finished."""
+        done = {k: v for k, v in records.items() if v}
+        write_results(out, result(paper_summary(done, costs, coll_frames, weights), cost=costs))
 
     def run_scene(sc, plan) -> None:
         """Walk every pair of room `sc` for each (model, weight) of `plan`, reusing stored sequences; its figure."""
@@ -256,32 +259,39 @@ def run(args) -> int:
                                        "encoder_bf16": args.encoder_bf16}, vols[m]))
                 rec = store.get(names[k], keys[k])
                 if rec is not None:
+                    rec.setdefault("case", names[k])
+                    rec["status"], rec["status_why"] = judge(rec)
                     recs[k] = rec
             for k in sorted(recs):
-                _print_case(sc.name, k, label, recs[k]["metrics"], reused=True)
+                _print_case(sc.name, k, label, recs[k], reused=True)
+                records[(m, w)].append(recs[k])
+                cases.setdefault(m, []).append(recs[k])
             todo = [k for k in range(len(sc.pairs)) if k not in recs]
             for i in range(0, len(todo), args.batch):   # the pairs not stored yet, up to --batch at a time
                 ks = todo[i:i + args.batch]
-                for k, r in zip(ks, synthesize_batch(model, vols[m], sc, [sc.pairs[k] for k in ks], w, cfg)):
+                for k, r in zip(ks, _walks(model, vols[m], sc, ks, w, cfg)):
                     s, g = sc.pairs[k]
-                    recs[k] = {"scene": sc.name, "sequence": k, "model": m, "w": w, "start": np.asarray(s).tolist(),
-                               "goal": np.asarray(g).tolist(), "frames": frames, "collision_frames": coll_frames[m],
-                               "metrics": r["metrics"]}
-                    if k < args.render:
+                    recs[k] = {"case": names[k], "scene": sc.name, "sequence": k, "model": m, "w": w,
+                               "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(), "frames": frames,
+                               "collision_frames": coll_frames[m], "metrics": r["metrics"]}
+                    recs[k]["status"], recs[k]["status_why"] = judge(recs[k])
+                    if k < args.render and r["walk"] is not None:
                         W.render_strip(r["walk"], body.faces, out / f"strip_{names[k]}.png", every=10)
                         figures[f"strip_{names[k]}"] = f"strip_{names[k]}.png"
                     store.put(names[k], keys[k], recs[k])
-                    _print_case(sc.name, k, label, recs[k]["metrics"])
-            for k in range(len(sc.pairs)):
-                paths.setdefault(label, []).append(np.asarray(recs[k]["metrics"]["pelvis_xz"]))
-                records[(m, w)].append(recs[k])
-                cases.setdefault(m, []).append(recs[k])
+                    _print_case(sc.name, k, label, recs[k])
+                    records[(m, w)].append(recs[k])
+                    cases.setdefault(m, []).append(recs[k])
+                    save_partial()
+            n = len(sc.pairs)   # this block's records, in sequence order (the last n of their lists)
+            records[(m, w)][-n:] = cases[m][-n:] = [recs[k] for k in range(n)]
+            for k in range(n):
+                if recs[k]["metrics"].get("pelvis_xz"):
+                    paths.setdefault(label, []).append(np.asarray(recs[k]["metrics"]["pelvis_xz"]))
         topdown(sc, paths, sc.pairs, path=out / f"topdown_{sc.name}.png")
         figures[f"topdown_{sc.name}"] = f"topdown_{sc.name}.png"
 
-    every = [(m, w) for m in models for w in weights[m]]
     if protocol == "tuned":   # the sweep on the tuning rooms, then each model's chosen weight on the others
-        tune, test = split_scenes([sc.name for sc in scenes])
         for sc in scenes:
             if sc.name in tune:
                 run_scene(sc, every)
@@ -307,21 +317,13 @@ def run(args) -> int:
               f"criterion: {tuning['criterion']}")
     print("per-frame cost: the collision term on the full cloud (" + ", ".join(sorted({c["memory_kind"] for c in costs.values()}))
           + "); total: peak of one whole-sequence optimisation; collision: exact mesh test, every scene point")
-    config = {"models": models, "weights": weights, "frames": frames, "iters": args.iters, "lr": args.lr,
-              "scenes": [sc.name for sc in scenes], "sequences": args.sequences if args.scene is None else 1,
-              "coll_frames": coll_frames, "mem_budget_gb": args.mem_budget_gb, "residuals": args.residuals,
-              "floor_in_loss": args.floor_in_loss, "user_scene": args.scene, "device": args.device,
-              "checkpoints": checkpoint_names(models, ckpts), "batch": args.batch, "protocol": protocol,
-              "encoder_bf16": args.encoder_bf16, "seed": args.seed, "threads": torch.get_num_threads(),
-              "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
-                           "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"}
-    result = envelope("motion", config, summary, {**paper.rows("motion"), **paper.rows("coll_weights")}, cases,
-                      machine_info(args.device), figures, tuning=tuning, cost=costs)
-    runs = compared_runs(result)
+    final = result(summary, tuning=tuning, cost=costs)
+    print_flagged(final["flagged"])
+    runs = compared_runs(final)
     if len(runs) >= 2 and min(len(r) for r in runs.values()) >= 2:   # paired differences need 2+ shared sequences
-        result["paired"] = paired_differences(runs)
-        print(format_pairs(result["paired"]))
-    write_results(out, result)
+        final["paired"] = paired_differences(runs)
+        print(format_pairs(final["paired"]))
+    write_results(out, final)
     note = store.note()
     if note:
         print(note)

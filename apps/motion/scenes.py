@@ -4,10 +4,13 @@ A `MotionScene` is a point cloud (16,384 farthest-point samples of the surfaces,
 floor at `floor_y`) with a name, and its start/goal pairs (x, z floor positions). Generated rooms
 (`room_scene(seed)`) come with the room itself (for footprints in plots); `load_scene(path, ...)` reads a mesh or a
 point cloud in any format trimesh reads (ply, obj, off, stl, glb, xyz...) or a .npy/.npz/.txt array of points,
-converts up-axis and units, and samples it to 16,384 points.
+converts up-axis and units, and samples it to 16,384 points; its size and up axis are checked right after reading
+(scene_checks.py: refused when they cannot be right, warned about when unusual) and its name is made file-safe
+(volsmpl.apps.checks.safe_name: `my room.ply` -> 'my_room-<hash>').
 
 `check_endpoint` refuses a start or goal off the floor or inside an obstacle, `check_pair` a pair that the walk
-cannot cover in its frames (a scene in the wrong --units), each with a clear ValueError.
+cannot cover in its frames (a scene in the wrong --units), each with a clear ValueError that repeats what looked odd
+about the scene (its `doubts`: units, up axis) as the likely cause.
 """
 from __future__ import annotations
 
@@ -17,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from volsmpl.scene import farthest_point_sample, make_room, room_points
-from volsmpl.scene.scan import UNITS, read_scan, to_y_up
+from volsmpl.scene.scan import UNITS, to_y_up
 
 N_POINTS = 16384
 BODY_CLEAR = 0.15     # metres: no obstacle point this close (horizontally) to a start or goal, below BODY_HEIGHT
@@ -30,7 +33,8 @@ FLOOR_REACH = 0.3     # metres: a floor point must lie this close to a start or 
 @dataclass
 class MotionScene:
     """A scene cloud and its start/goal pairs. points (N, 3) float32, floor (N,) bool (floor points), pairs:
-    list of (start (2,), goal (2,)) floor positions (x, z)."""
+    list of (start (2,), goal (2,)) floor positions (x, z); doubts: what looked odd about a user's scene
+    (scene_checks.check_scene), repeated by the refusals of its start and goal."""
 
     name: str
     points: np.ndarray
@@ -38,6 +42,13 @@ class MotionScene:
     floor_y: float = 0.0
     room: object = None
     pairs: list = field(default_factory=list)
+    doubts: list = field(default_factory=list)
+
+
+def _likely(scene: MotionScene) -> str:
+    """' (the scene looked odd: ...)' naming its doubts, or '' for a scene that looked right."""
+    doubts = getattr(scene, "doubts", None) or []
+    return f" (the scene looked odd: {'; '.join(doubts)}: check --units and --up)" if doubts else ""
 
 
 def check_endpoint(scene: MotionScene, xz, which: str) -> np.ndarray:
@@ -50,12 +61,13 @@ def check_endpoint(scene: MotionScene, xz, which: str) -> np.ndarray:
     d = np.linalg.norm(P[:, [0, 2]] - q, axis=1)
     if not (scene.floor & (d < FLOOR_REACH)).any():
         raise ValueError(f"{which} ({q[0]:.2f}, {q[1]:.2f}) is off the floor of scene '{scene.name}': no floor point "
-                         f"within {FLOOR_REACH} m; pick a position on the floor")
+                         f"within {FLOOR_REACH} m; pick a position on the floor{_likely(scene)}")
     h = P[:, 1] - scene.floor_y
     obst = (~scene.floor) & (h > 0.05) & (h < BODY_HEIGHT) & (d < BODY_CLEAR)
     if obst.any():
         raise ValueError(f"{which} ({q[0]:.2f}, {q[1]:.2f}) is inside an obstacle of scene '{scene.name}' "
-                         f"({int(obst.sum())} scene points within {BODY_CLEAR} m); pick a free floor position")
+                         f"({int(obst.sum())} scene points within {BODY_CLEAR} m); pick a free floor position"
+                         f"{_likely(scene)}")
     return q
 
 
@@ -73,12 +85,12 @@ def check_pair(scene: MotionScene, s: np.ndarray, g: np.ndarray, frames: int, un
              f"{size[2]:.1f} m and {size[1]:.1f} m tall")
     if dist < 0.1:
         raise ValueError(f"--start and --goal are {dist:.3f} m apart ({where}): nothing to walk; check --units or "
-                         f"pick points farther apart")
+                         f"pick points farther apart{_likely(scene)}")
     reach = SPEED_HI * (frames - 1) / FPS
     if dist > reach:
         need = int(np.ceil(dist / SPEED_HI * FPS)) + 1
         raise ValueError(f"--start and --goal are {dist:.2f} m apart ({where}); {frames} frames walk at most "
-                         f"{reach:.2f} m: check --units, or give --frames {need} or more")
+                         f"{reach:.2f} m: check --units, or give --frames {need} or more{_likely(scene)}")
 
 
 def walk_distance(frames: int, speed: float = 1.1) -> float:
@@ -138,11 +150,19 @@ def floor_xz(ab, up: str, units: str) -> np.ndarray:
 
 
 def load_scene(path, up: str = "y", units: str = "m", n: int = N_POINTS, floor_y: float | None = None,
-               floor_band: float = 0.03, seed: int = 0) -> MotionScene:
-    """A user's mesh or point cloud as a MotionScene (module docstring). The floor is at `floor_y` (metres, after
-    conversion; default the 1st percentile of the heights) and the floor points are those within floor_band; the cloud
-    is shifted so that the floor is at y = 0."""
-    pts = to_y_up(read_scan(path, units, n * 4, seed), up)
+               floor_band: float = 0.03, seed: int = 0, warn=None) -> MotionScene:
+    """A user's mesh or point cloud as a MotionScene (module docstring). The file is read and checked first
+    (scene_checks.read_points, check_scene: its size after `units`, its up axis; `warn(text)` gets the warnings).
+    The floor is at `floor_y` (metres, after conversion; default the 1st percentile of the heights) and the floor
+    points are those within floor_band; the cloud is shifted so that the floor is at y = 0. The scene's name is
+    the file's stem made file-safe (safe_name)."""
+    from volsmpl.apps.checks import safe_name
+
+    from .scene_checks import check_scene, read_points
+
+    raw = read_points(path, "--scene", units, n * 4, seed)
+    doubts = check_scene(raw, path, up, units, floor_y, warn)
+    pts = to_y_up(raw, up)
     if len(pts) > n:
         pts = pts[farthest_point_sample(pts, n, seed=seed)]
     fy = float(np.percentile(pts[:, 1], 1.0)) if floor_y is None else float(floor_y)
@@ -151,4 +171,4 @@ def load_scene(path, up: str = "y", units: str = "m", n: int = N_POINTS, floor_y
         raise ValueError(f"--scene {path}: no floor points at height {fy:.3f} m (+/- {floor_band} m); check --up, "
                          f"--units and --floor-y")
     pts[:, 1] -= fy   # the walking model's floor is y = 0
-    return MotionScene(Path(path).stem, pts.astype(np.float32), floor, 0.0)
+    return MotionScene(safe_name(Path(path).stem), pts.astype(np.float32), floor, 0.0, doubts=doubts)

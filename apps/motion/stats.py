@@ -84,7 +84,8 @@ def paired_differences(runs: dict, metrics=METRICS, confidence: float = 0.95, n_
 def compared_runs(result: dict) -> dict:
     """The rows a motion results.json compares, as label -> sequence records: under `volsmpl motion tune` (or with a
     tuning split) each model at its chosen weight on the test rooms; else Table 5's rows (COAP at w = 0.1, or its
-    first weight) on every room."""
+    first weight) on every room. A walk whose optimisation stopped on NaN/Inf (status 'diverged', its metrics
+    null and the optimiser's `error`) has nothing to pair and is left out (results.json flags it)."""
     cases = case_records(result.get("cases")) if isinstance(result, dict) else None
     if not cases or not all(isinstance(c, dict) and {"model", "w", "scene", "sequence", "metrics"} <= set(c)
                             for c in cases):
@@ -98,7 +99,8 @@ def compared_runs(result: dict) -> dict:
     for m in models:
         w = compared_weight(m, weights.get(m, [1.0]), choice)
         scenes = set(tuning["test_scenes"]) if m in choice else None
-        recs = [c for c in cases if c["model"] == m and float(c["w"]) == w and (scenes is None or c["scene"] in scenes)]
+        recs = [c for c in cases if c["model"] == m and float(c["w"]) == w and (scenes is None or c["scene"] in scenes)
+                and not (c["metrics"] or {}).get("error")]
         if recs:
             runs[f"{m}" if len(weights.get(m, [w])) == 1 else f"{m} (w {w:g})"] = recs
     return runs

@@ -36,13 +36,15 @@ def _mean(xs):
 
 
 def summarize(records: list, cost: dict, total_mem_mb: float, coll_frames) -> dict:
-    """One row: the means of the records' metrics, the cost columns, the total memory and the sequence count."""
+    """One row: the means of the records' metrics (their finite values), the cost columns, the total memory and
+    the sequence count (every record, also one whose walk has no values: status 'diverged')."""
     keys = ("goal_dist_m", "collision_cm", "collision_obstacles_cm", "collision_frames_pct", "foot_skate_cm",
             "max_depth_cm", "jerk_max", "path_m", "optim_s", "ms_per_iter")
     s = {k: _mean([r["metrics"][k] for r in records]) for k in keys}
     s.update(cost_columns(cost))
     s.update({"total_mem_mb": total_mem_mb, "n_sequences": len(records),
-              "collision_frames_evaluated": coll_frames, "total_mem_gb": total_mem_mb / 1024})
+              "collision_frames_evaluated": coll_frames,
+              "total_mem_gb": None if total_mem_mb is None else total_mem_mb / 1024})
     return s
 
 
@@ -79,8 +81,10 @@ def format_table(summary: dict) -> str:
 
 
 def _row(recs: list, cost: dict, coll_frames, w: float, **extra) -> dict:
-    """One summary row of a model's records at weight w (its total memory: the peak over the sequences)."""
-    s = summarize(recs, cost, max(r["metrics"]["optim_peak_mem_mb"] for r in recs), coll_frames)
+    """One summary row of a model's records at weight w (its total memory: the peak over the sequences that have
+    one)."""
+    peaks = [r["metrics"]["optim_peak_mem_mb"] for r in recs]
+    s = summarize(recs, cost, max((p for p in peaks if p is not None and np.isfinite(p)), default=None), coll_frames)
     return dict(s, w=w, **extra)
 
 

@@ -74,10 +74,10 @@ def initial_controls(start, goal, frames: int, dtype=torch.float32, device="cpu"
 
 
 def check_frames(frames) -> int:
-    if int(frames) != frames or int(frames) < 2:
-        raise ValueError(f"--frames must be an integer >= 2, got {frames}")
-    if int(frames) < 4:
-        raise ValueError(f"--frames {frames}: the jerk term of the objective needs at least 4 frames")
+    """--frames: a whole number >= 4 (the walking model needs 2 frames, the objective's jerk term 4)."""
+    if int(frames) != frames or int(frames) < 4:
+        raise ValueError(f"--frames {frames}: give a whole number >= 4 (the jerk term of the objective needs 4 "
+                         f"frames)")
     return int(frames)
 
 
@@ -139,7 +139,7 @@ def synthesize_batch(model: W.WalkModel, volume, scene, pairs, w: float = 1.0, c
     for b, (_, goal) in enumerate(pairs):
         walk = walks.select(b)
         metrics = evaluate(walk, model.body.faces, scene, goal)
-        metrics.update({"iterations": res.iterations[b], "optim_s": wall / B, "ms_per_iter": summ["ms_per_iter"],
+        metrics.update({"iterations": res.iterations[b], "stop": res.status[b], "optim_s": wall / B, "ms_per_iter": summ["ms_per_iter"],
                         "optim_peak_mem_mb": summ["peak_mem_mb"], "memory_kind": summ["memory_kind"], "batch": B,
                         "final_terms": {k: vv[b] for k, vv in res.records[-1].terms.items()},
                         "initial_terms": {k: vv[b] for k, vv in res.records[0].terms.items()}})
