@@ -5,11 +5,18 @@ Table 4, supp. D.2).
     volsmpl egohmr train --out runs/egohmr [--steps 4000] [--resume]
     volsmpl egohmr tune --split val --out docs/egohmr                # guidance scale per guide, on val: tune.json
     volsmpl egohmr sample --model none,volsmpl,coap,mesh --split test [--frames N] --out out/egohmr
-    volsmpl egohmr sample --frame my_frame.json --scene scan.ply [--units mm] [--up z] --out out/mine   # userframe.py
+    volsmpl egohmr sample --frame my_frame.json --scene scan.ply [--units mm] [--up z] --out out/mine   # user_run.py
 
 Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<guide>, the paper's Table 4, per-frame
 records per guide, figures, meta; then the regressor's row and the measured largest batch per guide) and
-OUT/frame_<name>.png for the first --render frames.
+OUT/frame_<name>.png for the first --render frames. Each per-frame record holds its `status` (ok, diverged,
+past_joint_limits, penetrating, far_from_keypoints: status.py) and `status_why`; results.json's `flagged` lists the
+others and `warnings` what a user's frame or scene made the run warn about.
+
+Every option is checked against the mode before any work (options.check_options): an option the mode does not read
+is refused, e.g. --split with `sample --frame`, --steps outside train, --factors outside tune; a user's frame and
+scene are checked for plausibility before the network loads (user_checks.py). sample, tune and a user's frame hold
+OUT for their run (volsmpl.apps.checks.claim_out).
 """
 from __future__ import annotations
 
@@ -38,13 +45,16 @@ def add_parser(sub):
                seed="the seed of the frames and of the sampler's noise",
                resume="sample: reuse each guide's finished samples in OUT/cases/ made by the same code, settings, "
                       "frames and weights; train: continue OUT's run")
-    p.add_argument("--split", default="test", choices=["train", "val", "test"])
-    p.add_argument("--frames", type=int, default=None, help="the first N frames of the split (default: all)")
+    p.add_argument("--split", default="test", choices=["train", "val", "test"],
+                   help="sample / tune: the generated split (tune's default: val)")
+    p.add_argument("--frames", type=int, default=None, help="sample / tune: the first N frames of the split "
+                                                            "(default: all)")
     p.add_argument("--checkpoint", default=None, help="the egohmr network's checkpoint (default: the shipped one)")
     p.add_argument("--scale", action="append", default=[], metavar="GUIDE=A",
-                   help="guidance scale a of a guide (repeatable); default: --tuned's, else the paper's "
-                        f"({', '.join(f'{k} {v:g}' for k, v in PAPER_SCALE.items())})")
-    p.add_argument("--tuned", default=None, help="a `tune` result whose best scales to use")
+                   help="sample: guidance scale a >= 0 of a guide in --model (repeatable); default: --tuned's, "
+                        f"else the paper's ({', '.join(f'{k} {v:g}' for k, v in PAPER_SCALE.items())})")
+    p.add_argument("--tuned", default=None, help="sample: a `tune` result (tune.json) whose best scales to use; it "
+                                                  "must hold one for each guide in --model without a --scale")
     p.add_argument("--factors", default=",".join(f"{f:g}" for f in TUNE_FACTORS),
                    help="tune: the scales tried, as factors of the paper's (comma-separated)")
     p.add_argument("--guide-steps", type=int, default=10, help="guided last steps (paper 10; authors' code 11)")
@@ -57,26 +67,28 @@ def add_parser(sub):
                    help="sample/tune: run the learned guides' part encoder (most of a guided step's cost) under "
                         "bfloat16 autocast, both kinds alike: ~1.5x faster per frame on a CPU with AVX512-BF16 or AMX "
                         "(emulated, not timed, on one without), codes rounded (docs/history/readme.md); default float32")
-    p.add_argument("--batch", type=int, default=16, help="frames sampled together")
-    p.add_argument("--budget-mb", type=float, default=2048.0, help="memory budget of the measured largest batch")
-    p.add_argument("--no-max-batch", action="store_true", help="skip measuring the largest batch")
+    p.add_argument("--batch", type=int, default=16, help="sample / tune on a split: frames sampled together")
+    p.add_argument("--budget-mb", type=float, default=2048.0,
+                   help="sample on a split: memory budget (MB, > 0) of the measured largest batch")
+    p.add_argument("--no-max-batch", action="store_true", help="sample on a split: skip measuring the largest batch")
     p.add_argument("--frame", default=None, help="sample: a user's frame file (JSON, apps/egohmr/userframe.py)")
     p.add_argument("--scene", default=None, help="with --frame: the scene (mesh or point cloud file)")
-    p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="--scene's units")
+    p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="with --frame: --scene's units")
     p.add_argument("--up", default="y", choices=["y", "z"],
-                   help="--scene's up axis: a z-up scan is turned Y-up before the frame's world_to_camera applies")
+                   help="with --frame: --scene's up axis: a z-up scan is turned Y-up before the frame's "
+                        "world_to_camera applies")
     p.add_argument("--steps", type=int, default=d.steps, help="train: optimisation steps")
     return p
 
 
 def run(args) -> int:
-    user = args.action == "sample" and bool(args.frame or args.scene)
+    from .options import check_options, mode_of
+
+    mode = mode_of(args)
+    check_options(args, mode)  # every option against the mode, before any work
+    user = mode == "egohmr sample --frame"
     if args.out is None and DEFAULT_OUT["user" if user else args.action]:
         args.out = DEFAULT_OUT["user" if user else args.action]
-    if args.batch < 1:
-        raise ValueError(f"--batch must be >= 1, got {args.batch}")
-    if args.frames is not None and args.frames < 1:
-        raise ValueError(f"--frames must be >= 1, got {args.frames}")
     ckpts = {}
     if args.action in ("sample", "tune"):
         models, ckpts = check_common(args, none=True)
@@ -86,13 +98,6 @@ def run(args) -> int:
             if not any(g != "none" and model_kind(g).learned for g in models):
                 raise ValueError(f"--encoder-bf16 sets the learned guides' encoder arithmetic, but --model "
                                  f"{args.model} has none: add volsmpl or coap, or drop the flag")
-    else:
-        from volsmpl.apps.table import check_threads
-
-        check_threads(args.threads)
-        if args.encoder_bf16:
-            raise ValueError(f"--encoder-bf16 sets the guides' encoder arithmetic: it applies to sample and tune, "
-                             f"not {args.action}; drop it")
     if args.action == "make-data":
         from .data import make_frames
 
@@ -107,11 +112,14 @@ def run(args) -> int:
         path = train(args.out, s, resume=args.resume)
         print(f"wrote {path}.safetensors")
         return 0
+    from volsmpl.apps.checks import claim_out
+
     from .run import run_sample, run_tune, run_user_frame
 
-    if args.action == "tune":
-        return run_tune(args, ckpts)
-    return run_user_frame(args, ckpts) if user else run_sample(args, ckpts)
+    with claim_out(args.out, "egohmr"):
+        if args.action == "tune":
+            return run_tune(args, ckpts)
+        return run_user_frame(args, ckpts) if user else run_sample(args, ckpts)
 
 
 __all__ = ["add_parser", "run", "parse_guides", "scales_of", "options_of", "GUIDES", "PAPER_SCALE", "TUNE_FACTORS"]

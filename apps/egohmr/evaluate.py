@@ -17,8 +17,8 @@ import torch
 
 from .diffusion import Guidance, Schedule, sample
 from .guidance import CollisionScore
-from .metrics import collision_ratio, contact, frame_errors, joint_means
-from .pose import POSE_DIM, pose_body, pose_joints
+from .metrics import contact, frame_errors, inside_masks, joint_means
+from .pose import POSE_DIM, pose_body_finite, pose_joints
 
 GUIDE_POINTS = 20000  # scene points of the collision score (supp. D.2: 20k in a 2 x 2 m cube)
 GUIDE_CUBE = 2.0
@@ -77,9 +77,11 @@ def draw(net, body, d: dict, volume=None, opts: GuideOptions | None = None, seed
 def sample_frames(net, body, frames, prep: dict, volume=None, opts: GuideOptions | None = None, batch: int = 16,
                   seed: int = 0, scenes=None, poses: torch.Tensor | None = None) -> list[dict]:
     """Per-frame records of one guide over frames (prep: `prepare` of the same frames): errors (mm), collision
-    ratio, contact, sampling seconds per frame. scenes: the frames' scene meshes (camera frame) for contact.
+    ratio, contact, sampling seconds per frame, and the frame's status judged without ground truth (status.py:
+    `status`, `status_why` and the measures it reads). scenes: the frames' scene meshes (camera frame) for contact.
     poses: score these pose vectors (B, 144) instead of sampling (e.g. the regressor's, prep['pose_reg'])."""
     from .data import scene_mesh
+    from .status import judge, measure
 
     recs = []
     faces = torch.as_tensor(body.faces, device=prep["kp"].device)
@@ -90,31 +92,45 @@ def sample_frames(net, body, frames, prep: dict, volume=None, opts: GuideOptions
         x = draw(net, body, d, volume, opts, seed=seed + s)[0] if poses is None else poses[idx]
         secs = (time.perf_counter() - t0) / len(idx)
         with torch.no_grad():
-            out = pose_body(body, d["betas_hat"], x, d["pelvis_hat"])
+            out = pose_body_finite(body, d["betas_hat"], x, d["pelvis_hat"])
             err = frame_errors(out.joints[:, :24], d["joints"], d["visible"])
-            coll = collision_ratio(out.vertices, faces, d["guide_points"]).cpu().numpy()
+            # the collision ratio's inside test, kept for the status's penetration depth; a diverged body (NaN or
+            # Inf) has no collision ratio and no contact, and its status says so
+            finite = torch.isfinite(out.vertices).flatten(1).all(1).cpu().numpy()
+            inside = inside_masks(out.vertices, faces, d["guide_points"])
+            coll = np.where(finite, inside.float().mean(1).cpu().numpy(), np.nan)
+            checks = measure(x, out.joints[:, :24], out.vertices, faces, d["kp"], d["guide_points"], inside)
         meshes = [scenes[int(i)] if scenes is not None else scene_mesh(frames[int(i)]) for i in idx]
-        cont = contact(out.vertices.cpu().numpy(), meshes)
+        cont = np.zeros(len(idx), dtype=bool)
+        if finite.any():
+            cont[finite] = contact(out.vertices.cpu().numpy()[finite], [m for m, ok in zip(meshes, finite) if ok])
         for j, i in enumerate(idx.tolist()):
+            status, why = judge(checks[j])
             recs.append({"frame": frames[i].name, "activity": frames[i].activity,
                          **{k: float(v[j]) for k, v in err.items()},
                          "collision_ratio": float(coll[j]), "contact": bool(cont[j]), "s_per_frame": secs,
-                         "pose": x[j].cpu().tolist()})
+                         **checks[j], "status": status, "status_why": why, "pose": x[j].cpu().tolist()})
     return recs
 
 
 def summarize(recs: list[dict]) -> dict:
     """A guide's row: joint-weighted MPJPE (all / visible / invisible), PA-MPJPE, collision ratio, contact %,
-    seconds per frame; means over frames."""
+    seconds per frame; means over frames. n_diverged: the frames whose sample holds NaN or Inf (status 'diverged');
+    where there is one, the row's errors, collision ratio and contact are NaN (a mean without them would hide it)."""
     if not recs:
         return {"n_frames": 0}
     arr = lambda k: np.array([r[k] for r in recs], dtype=np.float64)  # noqa: E731
     errs = {k: arr(k) for k in ("mpjpe_mm", "mpjpe_visible_mm", "mpjpe_invisible_mm", "n_visible", "n_invisible")}
-    return {"n_frames": len(recs), **joint_means(errs),
-            "pa_mpjpe_mm": float(arr("pa_mpjpe_mm").mean()),
-            "collision_ratio": float(arr("collision_ratio").mean()),
-            "contact_pct": 100.0 * float(np.mean([r["contact"] for r in recs])),
-            "s_per_frame": float(arr("s_per_frame").mean())}
+    row = {"n_frames": len(recs), **joint_means(errs),
+           "pa_mpjpe_mm": float(arr("pa_mpjpe_mm").mean()),
+           "collision_ratio": float(arr("collision_ratio").mean()),
+           "contact_pct": 100.0 * float(np.mean([r["contact"] for r in recs])),
+           "s_per_frame": float(arr("s_per_frame").mean())}
+    row["n_diverged"] = sum(not r.get("finite", True) for r in recs)
+    if row["n_diverged"]:
+        row.update({k: float("nan") for k in ("mpjpe_mm", "mpjpe_visible_mm", "mpjpe_invisible_mm", "pa_mpjpe_mm",
+                                               "collision_ratio", "contact_pct")})
+    return row
 
 
 @torch.no_grad()

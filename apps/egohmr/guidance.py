@@ -24,7 +24,7 @@ import torch
 from volsmpl.geometry.boxes import inside_boxes
 from volsmpl.body.partition import Partition
 
-from .pose import leg_mask, pose_body
+from .pose import identity_pose, leg_mask, pose_body
 
 WRT = ("denoised", "noisy")
 JOINTS = ("all", "legs")
@@ -81,8 +81,11 @@ class CollisionScore:
         return self.per_point(out).sum(1) / self.points.shape[1]
 
     def gradient(self, x_t: torch.Tensor, x0_hat: torch.Tensor, t: int) -> torch.Tensor:
-        """dJ/dx at the denoised estimate (wrt='denoised') or the noisy sample ('noisy'). Shape: -> (B, 144)."""
-        x = (x0_hat if self.wrt == "denoised" else x_t).detach().requires_grad_(True)
+        """dJ/dx at the denoised estimate (wrt='denoised') or the noisy sample ('noisy'); 0 for a frame whose pose
+        holds NaN or Inf (a diverged sample stays diverged, the batch's other frames go on). Shape: -> (B, 144)."""
+        x = (x0_hat if self.wrt == "denoised" else x_t).detach()
+        ok = torch.isfinite(x).all(-1, keepdim=True)
+        x = torch.where(ok, x, identity_pose(len(x), x.dtype, x.device)).requires_grad_(True)
         with torch.enable_grad():
             out = pose_body(self.body, self.betas, x, self.pelvis)
             pen = self.per_point(out)
@@ -97,7 +100,7 @@ class CollisionScore:
             (g,) = torch.autograd.grad(total, x)
         if self.joints == "legs":
             g = g * leg_mask(g.dtype, g.device)
-        return g
+        return torch.where(ok, g, 0.0)
 
 
 __all__ = ["CollisionScore", "WRT", "JOINTS", "REDUCE"]

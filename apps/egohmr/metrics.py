@@ -48,14 +48,27 @@ def procrustes(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
 
 
 def pa_mpjpe(pred: torch.Tensor, gt: torch.Tensor) -> torch.Tensor:
-    """Per-joint error after Procrustes alignment, millimetres. Shape: -> (B, J)."""
-    return 1000.0 * (procrustes(pred, gt) - gt).norm(dim=-1)
+    """Per-joint error after Procrustes alignment, millimetres; NaN for a frame whose prediction holds NaN or Inf.
+    Shape: -> (B, J)."""
+    ok = torch.isfinite(pred).flatten(1).all(1)[:, None, None]
+    e = 1000.0 * (procrustes(torch.where(ok, pred, gt), gt) - gt).norm(dim=-1)
+    return torch.where(ok[..., 0], e, float("nan"))
 
 
 def collision_ratio(vertices: torch.Tensor, faces: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
     """Fraction of each frame's points inside its body mesh (winding number > 1/2, exact).
     Shape: vertices (B, V, 3), faces (F, 3), points (B, N, 3) -> (B,)."""
     return torch.stack([(winding_numbers(vertices[b].detach(), faces, points[b]) > 0.5).float().mean()
+                        for b in range(len(vertices))])
+
+
+def inside_masks(vertices: torch.Tensor, faces: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+    """Which of each frame's points lie inside its body mesh (winding number > 1/2, exact: the test of
+    `collision_ratio`); none for a body with NaN or Inf vertices (a diverged sample).
+    Shape: vertices (B, V, 3), faces (F, 3), points (B, N, 3) -> (B, N) bool."""
+    finite = torch.isfinite(vertices.detach()).flatten(1).all(1).tolist()
+    return torch.stack([winding_numbers(vertices[b].detach(), faces, points[b]) > 0.5 if finite[b]
+                        else torch.zeros(points.shape[1], dtype=torch.bool, device=points.device)
                         for b in range(len(vertices))])
 
 
@@ -126,4 +139,5 @@ def joint_means(errors: dict) -> dict:
     return out
 
 
-__all__ = ["mpjpe", "procrustes", "pa_mpjpe", "collision_ratio", "contact", "frame_errors", "joint_means"]
+__all__ = ["mpjpe", "procrustes", "pa_mpjpe", "collision_ratio", "inside_masks", "contact", "frame_errors",
+           "joint_means"]

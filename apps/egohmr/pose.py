@@ -74,6 +74,22 @@ def pose_body(body, betas: torch.Tensor, x: torch.Tensor, pelvis: torch.Tensor):
     return body(betas=betas, global_orient=go, body_pose=bp, transl=transl_of(body, betas, pelvis))
 
 
+def pose_body_finite(body, betas: torch.Tensor, x: torch.Tensor, pelvis: torch.Tensor):
+    """`pose_body` of the frames whose pose, shape and pelvis are finite; the others (a diverged sample, which the
+    body refuses) get NaN vertices and joints. Returns an object with `vertices` (B, V, 3) and `joints` (B, J, 3)."""
+    from types import SimpleNamespace
+
+    ok = torch.isfinite(x).all(-1) & torch.isfinite(betas).all(-1) & torch.isfinite(pelvis).all(-1)
+    if bool(ok.all()):
+        return pose_body(body, betas, x, pelvis)
+    keep = ok[:, None]
+    out = pose_body(body, torch.where(keep, betas, 0.0), torch.where(keep, x, identity_pose(len(x), x.dtype, x.device)),
+                    torch.where(keep, pelvis, 0.0))
+    nan = float("nan")
+    return SimpleNamespace(vertices=torch.where(keep[:, :, None], out.vertices, nan),
+                           joints=torch.where(keep[:, :, None], out.joints, nan))
+
+
 def identity_pose(batch: int, dtype=torch.float32, device=None) -> torch.Tensor:
     """The rest pose as pose vectors. Shape: (batch, 144)."""
     z = torch.zeros(batch, NUM_JOINTS * 3, dtype=dtype, device=device)
@@ -88,4 +104,4 @@ def leg_mask(dtype=torch.float32, device=None) -> torch.Tensor:
 
 
 __all__ = ["NUM_JOINTS", "POSE_DIM", "LEG_JOINTS", "pose_vector", "check_pose", "rotation_matrices", "axis_angle",
-           "rest_joints", "pose_joints", "transl_of", "pose_body", "identity_pose", "leg_mask"]
+           "rest_joints", "pose_joints", "transl_of", "pose_body", "pose_body_finite", "identity_pose", "leg_mask"]

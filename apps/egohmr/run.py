@@ -1,21 +1,22 @@
-"""The `sample` and `tune` jobs of `volsmpl egohmr` (cli.py parses; this runs), and a user's own frame.
+"""The `sample` and `tune` jobs of `volsmpl egohmr` (cli.py parses and checks; this runs); a user's own frame:
+user_run.py.
 
-sample: every guide samples the same frames from the same noise; each is scored by the same exact tests;
+sample: every guide samples the same frames from the same noise; each is scored by the same exact tests and each
+frame judged without ground truth (status.py; results.json's `flagged` lists the frames not 'ok');
 results.json is rewritten after every guide (a long run stopped early keeps its finished guides).
 tune: each learned guide's scale swept over TUNE_FACTORS x the paper's on the val split; the best is the lowest
-collision ratio among the scales whose MPJPE stays within TUNE_MPJPE_SLACK_MM of the unguided sampler's.
+collision ratio among the scales whose MPJPE stays within TUNE_MPJPE_SLACK_MM of the unguided sampler's. tune.json
+is rewritten after every guide, its `best` holding the guides finished so far (`complete` false until the end).
 """
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import asdict
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from .evaluate import GUIDE_CUBE, GUIDE_POINTS
+from .user_run import run_user_frame
 
 TUNE_MPJPE_SLACK_MM = 2.0
 
@@ -62,7 +63,8 @@ def _config(args, guides: list[str], ckpts: dict, scales: dict, frames: int, spl
 
 
 def run_sample(args, ckpts: dict) -> int:
-    from volsmpl.apps.table import CaseRecords, envelope, write_results
+    from volsmpl.apps.checks import read_json
+    from volsmpl.apps.table import CaseRecords, envelope, flag_cases, print_flagged, write_results
     from volsmpl.geometry.point_mesh_distance import winding_numbers
     from volsmpl.io.provenance import machine_info
     from volsmpl.report import paper
@@ -70,10 +72,12 @@ def run_sample(args, ckpts: dict) -> int:
     from .evaluate import max_batch, sample_frames, summarize
     from .figures import frame_figure
     from .options import options_of, parse_guides, scales_of
-    from .pose import pose_body
+    from .pose import pose_body_finite
+    from .status import GOOD
 
     guides = parse_guides(args.model)
     scales = scales_of(args, guides)
+    tuning = read_json(args.tuned, "the tuning file", "--tuned") if args.tuned else None
     out = Path(args.out)
     body, net, meta, frames, prep, scenes = _setup(args, args.split)
     vols = _volumes(args, guides, ckpts, body.v_template.device)
@@ -119,11 +123,12 @@ def run_sample(args, ckpts: dict) -> int:
         for r, rec in zip(records[g], done["records"]):
             r["_pose"] = rec["pose"]
         extra = {"options": options, "regressor": reg, "max_batch": batches}
-        if args.tuned:
-            extra["tuning"] = json.loads(Path(args.tuned).read_text())
-        result = envelope("egohmr", config, summary, paper.rows("egohmr"),
-                          {k: [{kk: vv for kk, vv in r.items() if kk != "_pose"} for r in v] for k, v in records.items()},
-                          machine_info(args.device), **extra)
+        if tuning is not None:
+            extra["tuning"] = tuning
+        cases = {k: [{kk: vv for kk, vv in r.items() if kk != "_pose"} for r in v] for k, v in records.items()}
+        flagged = flag_cases(cases, "frame", good=GOOD)
+        result = envelope("egohmr", config, summary, paper.rows("egohmr"), cases, machine_info(args.device),
+                          flagged=flagged, **extra)
         write_results(out, result)
     # figures: the first frames, every guide's sample with the scene points inside it
     faces = torch.as_tensor(body.faces, device=prep["kp"].device)
@@ -138,7 +143,9 @@ def run_sample(args, ckpts: dict) -> int:
             samples, inside = {}, {}
             for g in guides:
                 x = torch.tensor(records[g][i]["_pose"], device=dev)[None]
-                v = pose_body(body, prep["betas_hat"][i:i + 1], x, prep["pelvis_hat"][i:i + 1]).vertices
+                v = pose_body_finite(body, prep["betas_hat"][i:i + 1], x, prep["pelvis_hat"][i:i + 1]).vertices
+                if not torch.isfinite(v).all():
+                    continue                                   # a diverged sample (its status says so): no panel
                 pts = prep["guide_points"][i]
                 inside[g] = pts[winding_numbers(v[0], faces, pts) > 0.5].cpu().numpy()  # the metric's test
                 samples[g] = v[0].cpu().numpy()
@@ -151,6 +158,7 @@ def run_sample(args, ckpts: dict) -> int:
     if note:
         print(note)
     print(format_table(summary))
+    print_flagged(flagged)
     print(f"wrote {out / 'results.json'}")
     return 0
 
@@ -161,15 +169,10 @@ def run_tune(args, ckpts: dict) -> int:
     from volsmpl.apps.table import write_results
 
     from .evaluate import sample_frames, summarize
-    from .options import PAPER_SCALE, options_of, parse_guides
+    from .options import PAPER_SCALE, factors_of, options_of, parse_guides
 
     guides = [g for g in parse_guides(args.model) if g != "none"]
-    try:
-        factors = [float(f) for f in args.factors.split(",") if f.strip()]
-    except ValueError:
-        raise ValueError(f"--factors {args.factors!r}: give comma-separated numbers, e.g. 0.1,1,10") from None
-    if not factors or any(not f > 0 for f in factors):
-        raise ValueError(f"--factors {args.factors!r}: give positive factors of the paper's scales")
+    factors = factors_of(args.factors)
     split = args.split if args.split != "test" else "val"
     if args.split == "test":
         print("tune: tuning runs on the val split (the test split is for reporting only)")
@@ -180,6 +183,15 @@ def run_tune(args, ckpts: dict) -> int:
     rows = [{"guide": "none", "scale": 0.0, **base}]
     print(f"none     MPJPE {base['mpjpe_mm']:.1f}  collision {base['collision_ratio']:.4f}")
     best = {}
+
+    def save(complete: bool):
+        doc = {"split": split, "frames": len(frames), "rule": f"lowest collision ratio with MPJPE within "
+               f"{TUNE_MPJPE_SLACK_MM} mm of the unguided sampler's", "factors": factors,
+               "paper_scales": PAPER_SCALE, "encoder_bf16": args.encoder_bf16, "rows": rows, "best": best,
+               "complete": complete, "config": _config(args, guides, ckpts, {}, len(frames), split),
+               "meta": machine_info(args.device)}
+        return write_results(args.out, doc, "tune.json")
+
     for g in guides:
         vol = vols[g]
         cands = []
@@ -191,102 +203,9 @@ def run_tune(args, ckpts: dict) -> int:
             print(f"{g:8s} a={a:<8g} MPJPE {s['mpjpe_mm']:.1f}  collision {s['collision_ratio']:.4f}")
         ok = [(a, s) for a, s in cands if s["mpjpe_mm"] <= base["mpjpe_mm"] + TUNE_MPJPE_SLACK_MM]
         best[g] = min(ok or cands, key=lambda c: (c[1]["collision_ratio"], c[1]["mpjpe_mm"]))[0]
-    doc = {"split": split, "frames": len(frames), "rule": f"lowest collision ratio with MPJPE within "
-           f"{TUNE_MPJPE_SLACK_MM} mm of the unguided sampler's", "factors": factors,
-           "paper_scales": PAPER_SCALE, "encoder_bf16": args.encoder_bf16, "rows": rows, "best": best,
-           "config": _config(args, guides, ckpts, {}, len(frames), split), "meta": machine_info(args.device)}
-    path = write_results(args.out, doc, "tune.json")
+        save(False)   # after every guide: a run stopped early keeps the finished guides' best scales
+    path = save(True)
     print(f"best scales {best}; wrote {path}")
-    return 0
-
-
-def _user_crop(points: np.ndarray, centre: np.ndarray, n: int, seed: int) -> np.ndarray:
-    from volsmpl.scene import crop_cube, subsample
-
-    from .data import MIN_SCENE_POINTS
-
-    c = points[crop_cube(points, centre, GUIDE_CUBE)]
-    if len(c) < MIN_SCENE_POINTS:
-        raise ValueError(f"the scene has {len(c)} points in the {GUIDE_CUBE:g} m cube around the estimated pelvis "
-                         f"{np.round(centre, 2).tolist()} (camera frame, m): check --units and 'world_to_camera', or "
-                         f"give a denser scan")
-    return c[subsample(c, n, seed=seed)]
-
-
-def run_user_frame(args, ckpts: dict) -> int:
-    """A user's frame file and scene scan: each guide's sample, its collision ratio and contact (exact tests on
-    the scan's points), and a figure; no ground truth, so no joint errors."""
-    import volsmpl
-    from volsmpl.geometry.point_mesh_distance import winding_numbers
-    from volsmpl.io.provenance import machine_info
-    from volsmpl.viz.render import render_camera_view, grid, save_png
-    from volsmpl.scene.scan import read_scan, to_y_up
-    from scipy.spatial import cKDTree
-
-    from volsmpl.apps.table import envelope, write_results
-
-    from .dataset import keypoint_input
-    from .options import options_of, parse_guides, scales_of
-    from .evaluate import draw
-    from .figures import camera_of
-    from .pose import pose_body
-    from .train import load_model
-    from .userframe import camera_points, load_user_frame
-
-    if not (args.frame and args.scene):
-        raise ValueError("a user's frame needs both --frame FILE.json and --scene SCAN (see apps/egohmr/userframe.py)")
-    guides = parse_guides(args.model)
-    scales = scales_of(args, guides)
-    out = Path(args.out)
-    frame = load_user_frame(args.frame)
-    scan = camera_points(frame, to_y_up(read_scan(args.scene, args.units, n_surface=1_000_000, seed=args.seed), args.up))
-    dev = torch.device(args.device)
-    body = volsmpl.create_body().to(dev)
-    net, meta = load_model(args.checkpoint, body)
-    net.to(dev)
-    with torch.no_grad():
-        c_kp = net.keypoints(torch.as_tensor(keypoint_input(frame), device=dev)[None])
-        pelvis, betas, pose_reg = net.regress(c_kp)
-    centre = pelvis[0].cpu().numpy().astype(np.float64)
-    cond_pts = _user_crop(scan, centre, net.config.scene_points, args.seed) - centre
-    guide_pts = _user_crop(scan, centre, GUIDE_POINTS, args.seed + 7919)
-    d = {"c_kp": c_kp, "pelvis_hat": pelvis, "betas_hat": betas,
-         "scene_cond": torch.as_tensor(cond_pts, dtype=torch.float32, device=dev)[None],
-         "guide_points": torch.as_tensor(guide_pts, dtype=torch.float32, device=dev)[None]}
-    tree = cKDTree(guide_pts)
-    faces = torch.as_tensor(body.faces, device=dev)
-    summary, panels = {}, []
-    cam = camera_of(frame.K, frame.image_size)
-    vols = _volumes(args, guides, ckpts, dev)
-    for g in guides:
-        vol = vols[g]
-        t0 = time.perf_counter()
-        x, _ = draw(net, body, d, vol, options_of(args, scales[g]), seed=args.seed)
-        secs = time.perf_counter() - t0
-        with torch.no_grad():
-            v = pose_body(body, betas, x, pelvis).vertices[0]
-        inside = (winding_numbers(v, faces, d["guide_points"][0]) > 0.5).cpu().numpy()
-        v = v.cpu()
-        near = tree.query(v.numpy(), k=1)[0]
-        summary[g] = {"n_frames": 1, "collision_ratio": float(inside.mean()),
-                      "contact_pct": 100.0 * float((near <= 0.02).any() or inside.any()), "s_per_frame": secs,
-                      "scale": scales[g]}
-        red = np.tile([[0.9, 0.1, 0.1]], (int(inside.sum()), 1))
-        grey = np.tile([[0.6, 0.6, 0.6]], (len(guide_pts) - int(inside.sum()), 1))
-        img = render_camera_view([(v.numpy(), body.faces, (0.35, 0.55, 0.9))], cam,
-                                 points=np.concatenate([guide_pts[inside], guide_pts[~inside]]),
-                                 point_colors=np.concatenate([red, grey]), point_radius=1)
-        panels.append((img, f"{g}: {int(inside.sum())} scene points inside"))
-        print(f"{g:8s} collision {summary[g]['collision_ratio']:.4f}  contact {summary[g]['contact_pct']:.0f} %  "
-              f"{secs:.2f} s")
-    save_png(out / f"frame_{frame.name}.png", grid([p[0] for p in panels], [p[1] for p in panels], cols=2))
-    config = {**_config(args, guides, ckpts, scales, 1, "user"), "frame": str(args.frame), "scene": str(args.scene),
-              "units": args.units, "up": args.up}
-    result = envelope("egohmr", config, summary, None, {g: [{"name": frame.name, **s}] for g, s in summary.items()},
-                      machine_info(args.device),
-                      {frame.name: f"frame_{frame.name}.png"}, pelvis=centre.tolist())
-    write_results(out, result)
-    print(f"wrote {out / 'results.json'}")
     return 0
 
 

@@ -11,7 +11,9 @@
 
 K, image_size and the keypoints describe one image: a principal point outside the image's central 80 % or a
 confident keypoint more than 5 % of the image outside it is refused (the signs of K or keypoints made for another
-resolution, or of [W, H] given for [H, W], which would otherwise silently scale the network's input).
+resolution, or of [W, H] given for [H, W], which would otherwise silently scale the network's input); the focal
+lengths and the keypoints' spread are checked by user_checks.check_camera. The frame's name (its figure's file name)
+is the file's stem made file-name safe (volsmpl.apps.checks.safe_name).
 
 The scene file (`--scene`, read by volsmpl.scene.scan, `--units` m / cm / mm, `--up` y or z) is turned Y-up
 (a z-up scan's (x, y, z) becomes (x, z, -y)) and then mapped by `world_to_camera`, which is therefore given in
@@ -22,7 +24,6 @@ the Y-up world. The network sees everything in the camera frame.
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,6 +46,7 @@ class UserFrame:
     keypoints: np.ndarray     # (24, 2)
     conf: np.ndarray          # (24,)
     world_to_camera: np.ndarray  # (4, 4)
+    has_world: bool = False      # the file gives world_to_camera (else the scene is in camera coordinates)
 
 
 def _array(d: dict, key: str, shape: tuple, where: str) -> np.ndarray:
@@ -66,14 +68,14 @@ def _array(d: dict, key: str, shape: tuple, where: str) -> np.ndarray:
 
 def load_user_frame(path) -> UserFrame:
     """The frame file (module docstring), checked: one clear ValueError naming the problem otherwise."""
+    from volsmpl.apps.checks import read_json, safe_name
+
     p = Path(path)
-    if not p.is_file():
-        raise ValueError(f"--frame {path}: no such file")
-    try:
-        d = json.loads(p.read_text())
-    except ValueError as e:
-        raise ValueError(f"--frame {path}: not valid JSON ({e})") from None
+    d = read_json(p, "the frame file", "--frame")
     where = f"--frame {path}"
+    if not isinstance(d, dict):
+        raise ValueError(f"{where}: the frame file must hold one JSON object with K, image_size, keypoints and conf "
+                         f"(format in apps/egohmr/userframe.py)")
     K = _array(d, "K", (3, 3), where)
     if K[0, 0] <= 0 or K[1, 1] <= 0 or not np.allclose(K[2], [0, 0, 1]):
         raise ValueError(f"{where}: 'K' must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0")
@@ -89,10 +91,10 @@ def load_user_frame(path) -> UserFrame:
     H, W = float(size[0]), float(size[1])
     cx, cy = K[0, 2], K[1, 2]
     if not (CENTRE[0] * W <= cx <= CENTRE[1] * W and CENTRE[0] * H <= cy <= CENTRE[1] * H):
-        raise ValueError(f"{where}: the principal point (cx, cy) = ({cx:g}, {cy:g}) lies outside the central part of "
-                         f"image_size [H, W] = [{H:g}, {W:g}]: K is probably for another resolution (scale fx, fy, "
-                         f"cx, cy by the ratio of the sizes) or image_size is [W, H]; give K, image_size and keypoints "
-                         f"of one image")
+        raise ValueError(f"{where}: 'K': the principal point (cx, cy) = ({cx:g}, {cy:g}) lies outside the central "
+                         f"80 % of image_size [H, W] = [{H:g}, {W:g}]: a camera matrix for another image size? (scale "
+                         f"fx, fy, cx, cy by the ratio of the sizes) or image_size given as [W, H]? give K, image_size "
+                         f"and keypoints of one image")
     seen = conf > 0
     off = seen & ((kp[:, 0] < -OUTSIDE * W) | (kp[:, 0] > (1 + OUTSIDE) * W)
                   | (kp[:, 1] < -OUTSIDE * H) | (kp[:, 1] > (1 + OUTSIDE) * H))
@@ -101,11 +103,13 @@ def load_user_frame(path) -> UserFrame:
         raise ValueError(f"{where}: {int(off.sum())} keypoints with a confidence above 0 lie outside the image "
                          f"[H, W] = [{H:g}, {W:g}] (joint {j} at ({kp[j, 0]:g}, {kp[j, 1]:g})): give keypoints in "
                          f"pixels of that image (u along W, v along H), and confidence 0 for joints out of view")
-    T = _array(d, "world_to_camera", (4, 4), where) if "world_to_camera" in d else np.eye(4)
+    world = "world_to_camera" in d
+    T = _array(d, "world_to_camera", (4, 4), where) if world else np.eye(4)
     R = T[:3, :3]
     if not np.allclose(T[3], [0, 0, 0, 1]) or not np.allclose(R @ R.T, np.eye(3), atol=1e-4) or np.linalg.det(R) < 0:
         raise ValueError(f"{where}: 'world_to_camera' must be a rigid 4x4 transform (rotation and translation)")
-    return UserFrame(p.stem, K, (int(size[0]), int(size[1])), np.where(conf[:, None] > 0, kp, 0.0), conf, T)
+    return UserFrame(safe_name(p.stem), K, (int(size[0]), int(size[1])), np.where(conf[:, None] > 0, kp, 0.0), conf,
+                     T, world)
 
 
 def camera_points(frame: UserFrame, points: np.ndarray) -> np.ndarray:

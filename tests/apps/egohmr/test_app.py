@@ -82,6 +82,15 @@ def test_cli_sample_writes_results_and_figures(tmp_path, tiny_ckpt):
                 "max_batch", "peak_mem_mb", "n_frames"):
         assert key in res["summary"]["volsmpl"], key
     assert len(res["cases"]["volsmpl"]) == 2 and (out / res["figures"][res["cases"]["none"][0]["frame"]]).is_file()
+    # each frame judged; the flagged list names exactly the frames whose status is not 'ok'; strict JSON
+    from volsmpl.apps.egohmr.status import STATUSES
+
+    recs = [(g, r) for g, rs in res["cases"].items() for r in rs]
+    assert all(r["status"] in STATUSES and isinstance(r["status_why"], str) for _, r in recs)
+    assert sorted((f["model"], f["case"]) for f in res["flagged"]) == \
+        sorted((g, r["frame"]) for g, r in recs if r["status"] != "ok")
+    assert res["warnings"] == []
+    json.loads((out / "results.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in results.json"))
 
 
 def test_bad_input_gets_one_line(tmp_path, capsys, tiny_ckpt):
@@ -209,6 +218,9 @@ def test_user_frame_and_scan_run_end_to_end(tmp_path, frames, tiny_ckpt):
     assert rc == 0
     res = json.loads((out / "results.json").read_text())
     assert set(res["summary"]) == {"none", "volsmpl"} and (out / "frame_frame.png").is_file()
+    assert all(r[0]["status"] in ("ok", "diverged", "past_joint_limits", "penetrating", "far_from_keypoints")
+               and r[0]["name"] == "frame" for r in res["cases"].values())
+    assert isinstance(res["warnings"], list) and isinstance(res["flagged"], list)
     bad = dict(doc, keypoints=f.keypoints[:17].tolist())
     (tmp_path / "bad.json").write_text(json.dumps(bad))
     with pytest.raises(ValueError, match="24 SMPL joints"):
@@ -237,3 +249,22 @@ def test_sampling_gives_the_same_poses_on_every_device(body, frames, tiny_ckpt, 
              seed=3)[0]
     assert x.device.type == device
     assert torch.allclose(x.cpu(), ref, atol=1e-3)
+
+
+def test_a_diverged_sample_is_flagged_not_fatal(body, frames, tiny_ckpt):
+    """A pose with NaN scores as diverged (no collision ratio, no contact) while the other frames are scored."""
+    from volsmpl.apps.table import flag_cases
+
+    _, net = tiny_ckpt
+    prep = prepare(net, body, frames, n_guide=500)
+    poses = prep["pose_reg"].clone()
+    poses[1, 3] = float("nan")
+    recs = sample_frames(net, body, frames, prep, batch=2, poses=poses)
+    assert recs[0]["status"] != "diverged" and np.isfinite(recs[0]["collision_ratio"])
+    assert recs[1]["status"] == "diverged" and np.isnan(recs[1]["collision_ratio"]) and recs[1]["contact"] is False
+    assert flag_cases({"none": recs}, "frame", good={"ok"})[-1] == {
+        "case": frames[1].name, "model": "none", "status": "diverged",
+        "why": "the pose or the posed body holds NaN or Inf"}
+    row = summarize(recs)                                 # a row with a diverged frame says so, loudly
+    assert row["n_diverged"] == 1 and np.isnan(row["mpjpe_mm"]) and np.isnan(row["collision_ratio"])
+    assert summarize(recs[:1])["n_diverged"] == 0 and np.isfinite(summarize(recs[:1])["mpjpe_mm"])
