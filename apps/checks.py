@@ -24,8 +24,8 @@ from pathlib import Path
 
 __all__ = ["ALWAYS", "applies", "number", "read_json", "safe_name", "warn", "claim_out", "strict_json"]
 
-#: options every mode takes: the subcommand and action, the device, the traceback switch and the parser itself
-ALWAYS = frozenset({"command", "action", "device", "debug", "_run", "_parser"})
+#: options every mode takes: the subcommand and action, the traceback switch and the parser itself
+ALWAYS = frozenset({"command", "action", "debug", "_run", "_parser"})
 
 
 def _flag(dest: str) -> str:
@@ -63,7 +63,7 @@ def number(value, flag: str, *, lo: float | None = None, hi: float | None = None
     bad = bad or (lo is not None and (x <= lo if lo_open else x < lo))
     bad = bad or (hi is not None and (x >= hi if hi_open else x > hi))
     if bad:
-        raise ValueError(f"{flag} {value}: give a finite number{' ' + want if want else ''}"
+        raise ValueError(f"{flag} {x:g}: give a finite number{' ' + want if want else ''}"
                          f"{' (' + what + ')' if what else ''}")
     return x
 
@@ -74,7 +74,8 @@ def read_json(path, what: str, flag: str = "") -> object:
     path = Path(path)
     via = f" ({flag})" if flag else ""
     if not path.is_file():
-        raise FileNotFoundError(f"{what} {path}{via} not found")
+        raise FileNotFoundError(f"{what} {path}{via} not found; give the path of an existing file (relative to "
+                                f"the folder you run in, or absolute)")
     try:
         text = path.read_text(encoding="utf-8")
     except UnicodeDecodeError as e:

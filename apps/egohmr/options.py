@@ -16,14 +16,14 @@ TUNE_FACTORS = (0.1, 0.3, 1.0, 3.0, 10.0)
 #: the options that shape the guided sampler (read only where --model has a guide other than 'none')
 GUIDANCE = {"guide_steps", "plain_steps", "plain_factor", "wrt", "joints", "reduce", "encoder_bf16"}
 #: the options of the volumes and of the egohmr network
-MODELS = {"model", "checkpoint_volsmpl", "checkpoint_coap", "checkpoint", "threads", "seed", "out"}
+MODELS = {"model", "checkpoint_volsmpl", "checkpoint_coap", "checkpoint", "threads", "seed", "out", "device"}
 #: mode -> the options (argparse dests) it reads; any other given with a non-default value is refused
 USES = {
     "egohmr sample": MODELS | GUIDANCE | {"scale", "tuned", "split", "frames", "batch", "budget_mb", "no_max_batch",
                                           "resume", "render"},
     "egohmr sample --frame": MODELS | GUIDANCE | {"scale", "tuned", "frame", "scene", "units", "up", "render"},
     "egohmr tune": MODELS | GUIDANCE | {"split", "frames", "batch", "factors"},
-    "egohmr train": {"out", "steps", "seed", "threads", "resume"},
+    "egohmr train": {"out", "steps", "seed", "threads", "resume", "device"},
     "egohmr make-data": {"seed", "threads"},
 }
 

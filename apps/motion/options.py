@@ -15,7 +15,7 @@ PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
 ALL_SCENES = 15
 
 #: what every mode reads: the models and their cost, the walk's optimisation, the output
-_WALK = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "resume", "render", "frames", "iters",
+_WALK = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device", "resume", "render", "frames", "iters",
          "lr", "w", "coll_frames", "mem_budget_gb", "residuals", "floor_in_loss", "cost_frames", "cost_repeats",
          "published_cost", "encoder_bf16"}
 _ROOMS = _WALK | {"scenes", "sequences", "seed", "batch"}

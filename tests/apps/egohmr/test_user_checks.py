@@ -194,11 +194,11 @@ def test_options_the_mode_does_not_read_are_refused(argv, said, capsys, tmp_path
     (["--scale", "volsmpl=-30"], "--scale volsmpl -30: give a finite number >= 0"),
     (["--scale", "mesh=nan"], "--scale mesh nan: give a finite number >= 0"),
     (["--scale", "coap=1", "--model", "none,volsmpl"], "coap is not in --model none,volsmpl"),
-    (["--budget-mb", "-5"], "--budget-mb -5.0: give a finite number > 0"),
+    (["--budget-mb", "-5"], "--budget-mb -5: give a finite number > 0"),
     (["--budget-mb", "inf"], "--budget-mb inf: give a finite number > 0"),
     (["--guide-steps", "0"], "--guide-steps 0: give a finite number >= 1"),
     (["--plain-steps", "11"], "--plain-steps 11: give a finite number >= 0 and <= 10"),
-    (["--plain-factor", "-1"], "--plain-factor -1.0: give a finite number >= 0"),
+    (["--plain-factor", "-1"], "--plain-factor -1: give a finite number >= 0"),
     (["--frames", "0"], "--frames 0: give a finite number >= 1"),
     (["--batch", "0"], "--batch 0: give a finite number >= 1"),
 ])

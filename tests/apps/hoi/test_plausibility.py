@@ -113,8 +113,8 @@ def test_judge_fit_on_hand_made_measures():
 @pytest.mark.parametrize("extra, message", [
     (["--iters", "0"], "--iters 0: give a finite number >= 1"),
     (["--lr", "nan"], "--lr nan: give a finite number > 0"),
-    (["--w-keypoints", "-1"], "--w-keypoints -1.0: give a finite number >= 0"),
-    (["--contact-fraction", "2"], "--contact-fraction 2.0: give a finite number > 0 and <= 1"),
+    (["--w-keypoints", "-1"], "--w-keypoints -1: give a finite number >= 0"),
+    (["--contact-fraction", "2"], "--contact-fraction 2: give a finite number > 0 and <= 1"),
     (["--threads", "0"], "--threads 0: give a positive number"),
     (["--split", "tune"], "--split does not apply to `volsmpl hoi fit`"),
     (["--cases", "3", "--db", "x"], "--cases, --db do not apply to `volsmpl hoi fit`"),

@@ -189,7 +189,7 @@ def test_cli_refuses_options_a_mode_does_not_read_and_bad_numbers_before_any_wor
              (["--frames", "3"], "--frames 3: give a whole number >= 4 (the jerk term"),
              (["--iters", "-1"], "--iters -1: give a finite number >= 0"),
              (["--lr", "nan"], "--lr nan: give a finite number > 0"),
-             (["--lr", "0"], "--lr 0.0: give a finite number > 0"),
+             (["--lr", "0"], "--lr 0: give a finite number > 0"),
              (["--mem-budget-gb", "inf"], "--mem-budget-gb inf: give a finite number > 0"),
              (["--cost-frames", "0"], "--cost-frames 0: give a finite number >= 1"),
              (["--cost-repeats", "0"], "--cost-repeats 0: give a finite number >= 1"),

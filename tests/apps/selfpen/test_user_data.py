@@ -15,8 +15,8 @@ from volsmpl.cli import main as cli_main
 @pytest.mark.parametrize("extra, message", [
     (["--w-prior", "nan"], "--w-prior nan: give a finite number >= 0"),
     (["--max-step", "nan"], "--max-step nan: give a finite number >= 0"),
-    (["--lr", "-1"], "--lr -1.0: give a finite number > 0"),
-    (["--tau", "0"], "--tau 0.0: give a finite number > 0"),
+    (["--lr", "-1"], "--lr -1: give a finite number > 0"),
+    (["--tau", "0"], "--tau 0: give a finite number > 0"),
     (["--max-iters", "0"], "--max-iters 0: give a finite number >= 1"),
     (["--n-points", "0"], "--n-points 0: give a finite number >= 1"),
     (["--patience", "-1"], "--patience -1: give a finite number >= 0"),
