@@ -7,7 +7,7 @@ every option against the mode it is given to (`check_options`, before any work).
 """
 from __future__ import annotations
 
-from volsmpl.apps.checks import applies, number, read_json
+from volsmpl.apps.checks import applies, number, warn, read_json
 
 GUIDES = ("none", "volsmpl", "coap", "mesh")
 PAPER_SCALE = {"volsmpl": 30.0, "coap": 0.4, "mesh": 30.0}
@@ -150,6 +150,8 @@ def check_options(args, mode: str) -> None:
     check_threads(args.threads)
     if mode == "egohmr sample --frame" and not args.scene:
         raise ValueError("--frame needs the frame's scene: add --scene SCAN (a mesh or point-cloud file)")
+    if "seed" in uses:
+        number(args.seed, "--seed", lo=0, what="a seed: a whole number")
     if "batch" in uses:
         number(args.batch, "--batch", lo=1, what="frames sampled together")
     if "frames" in uses and args.frames is not None:
@@ -168,7 +170,10 @@ def check_options(args, mode: str) -> None:
     if "factors" in uses:
         factors_of(args.factors)
     if "scale" in uses:
-        scales_of(args, guides)
+        for g, a in scales_of(args, guides).items():
+            if g != "none" and a > 100 * PAPER_SCALE[g]:
+                warn("egohmr", f"--scale {g} {a:g} is {a / PAPER_SCALE[g]:.0f}x the paper's ({PAPER_SCALE[g]:g}): "
+                               f"steps this large throw the pose far from the sample (a typo?)")
 
 
 def options_of(args, scale: float):

@@ -130,6 +130,8 @@ def check_options(args) -> None:
     """The options of the chosen action, before any work: those it does not read refused, the numbers in range."""
     applies(args, f"hoi {args.action}", USES[args.action])
     check_threads(args.threads)
+    if "seed" in USES[args.action]:
+        number(args.seed, "--seed", lo=0, what="a seed: a whole number")
     if args.action == "make-db":
         number(args.n, "--n", lo=1, what="cases to make")
         return

@@ -117,6 +117,7 @@ def check_options(args) -> dict:
     else:
         n = scene_count(args.scenes)
         number(args.sequences, "--sequences", lo=1, what="start/goal pairs per room")
+        number(args.seed, "--seed", lo=0, what="a seed: a whole number")
         number(args.batch, "--batch", lo=1, what="pairs optimised together")
         if mode == "motion tune" and n < 2:
             raise ValueError("tune splits generated rooms into tuning and test rooms: use --scenes 2 or more")

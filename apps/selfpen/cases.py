@@ -168,6 +168,25 @@ def cases_to_json(cases: list[dict]) -> str:
 
 
 # ---------------------------------------------------------------------------------------- loading
+#: the largest joint rotation (radians) of an axis-angle pose: 2 pi (a rotation by more is the same as one by less);
+#: and the largest shape coefficient accepted (the shape space's coefficients are in standard deviations: 3 is rare)
+MAX_ANGLE, MAX_BETA = 2 * np.pi, 10.0
+
+
+def _check_plausible(vals: dict, where: str) -> None:
+    """A pose in degrees or shape coefficients of another scale are refused: one line naming the field."""
+    for key in ("global_orient", "body_pose"):
+        angles = np.linalg.norm(vals[key].numpy().reshape(-1, 3), axis=1)
+        if angles.max() > MAX_ANGLE:
+            j = int(angles.argmax())
+            raise ValueError(f"{where}: '{key}' turns joint {j} by {angles.max():.3g} rad (axis-angle in radians, at "
+                             f"most 2 pi): is it in degrees? multiply by pi / 180")
+    b = float(np.abs(vals["betas"].numpy()).max())
+    if b > MAX_BETA:
+        raise ValueError(f"{where}: 'betas' reaches {b:.3g}; shape coefficients are in standard deviations of the "
+                         f"shape space (|beta| <= {MAX_BETA:g}; 3 is already rare): betas of another model or scale?")
+
+
 def case_from_dict(d: dict, where: str = "case") -> Case:
     """Validate one case dict (name, betas (10), global_orient (3), body_pose (69), finite) -> Case."""
     if not isinstance(d, dict):
@@ -192,6 +211,7 @@ def case_from_dict(d: dict, where: str = "case") -> Case:
             bad = np.nonzero(~np.isfinite(a))[0].tolist()
             raise ValueError(f"{where}: '{key}' contains NaN or Inf at indices {bad[:8]}")
         vals[key] = torch.as_tensor(a, dtype=torch.float32)
+    _check_plausible(vals, where)
     return Case(name=name, description=str(d.get("description", "")), collisions=d.get("collisions"), **vals)
 
 

@@ -126,6 +126,7 @@ def check_options(args) -> None:
             number(getattr(args, flag), "--" + flag.replace("_", "-"), lo=lo, lo_open=lo_open)
     number(args.max_iters, "--max-iters", lo=1, what="optimisation steps")
     number(args.n_points, "--n-points", lo=1, what="samples per box")
+    number(args.sampler_seed, "--sampler-seed", lo=0, what="a seed: a whole number")
     for flag in ("grid_lr", "grid_w_selfpen", "grid_w_prior"):
         for v in getattr(args, flag):
             number(v, "--" + flag.replace("_", "-"), lo=0, lo_open=flag == "grid_lr")

@@ -102,3 +102,30 @@ def test_an_output_folder_of_another_app_or_in_use_is_refused(tmp_path, monkeypa
         assert cli_main(args + ["--out", str(busy)]) == 2
         assert "is being written by another volsmpl selfpen run" in capsys.readouterr().err
     assert cli_main(args + ["--out", str(busy)]) == 0  # released: runs
+
+
+def test_a_pose_in_degrees_or_betas_of_another_scale_are_refused(tmp_path):
+    """Axis-angle in radians turns a joint by at most 2 pi; 90 (degrees) is refused naming the field and the fix.
+    Shape coefficients in standard deviations: 30 is refused, 5 (an extreme but real body) accepted."""
+    from volsmpl.apps.selfpen.cases import load_cases
+
+    def case(**over):
+        d = {"name": "c", "betas": [0.0] * 10, "global_orient": [0.0] * 3, "body_pose": [0.0] * 69, **over}
+        (tmp_path / "c.json").write_text(json.dumps({"cases": [d]}))
+        return tmp_path / "c.json"
+
+    pose = [0.0] * 69
+    pose[47] = 90.0  # joint 15, about z: a right angle written in degrees
+    with pytest.raises(ValueError, match=r"'body_pose' turns joint 15 by 90 rad .*is it in degrees\?"):
+        load_cases(case(body_pose=pose))
+    pose[47] = 6.0  # 6 rad < 2 pi: a real (if odd) rotation
+    assert load_cases(case(body_pose=pose))[0].name == "c"
+    with pytest.raises(ValueError, match=r"'betas' reaches 30; shape coefficients are in standard deviations"):
+        load_cases(case(betas=[30.0] + [0.0] * 9))
+    assert load_cases(case(betas=[5.0] * 10))[0].name == "c"
+
+
+def test_a_negative_seed_is_refused(tmp_path, capsys):
+    assert cli_main(["selfpen", "--model", "mesh", "--sampler-seed", "-1", "--case-file", str(tmp_path / "none.json"),
+                     "--out", str(tmp_path / "o")]) == 2
+    assert "--sampler-seed -1: give a finite number >= 0" in capsys.readouterr().err
