@@ -183,7 +183,7 @@ def _flags():
             ("hoi", "", [("--batch 0", "--batch")]),
             ("hoi", "make-db", [("--n 0", "--n"), ("--n 1 --seed -1", "--seed")]),
             ("motion", "", [("--scenes abc", "--scenes"), ("--scenes 0", "--scenes"), ("--frames 0", "--frames"), 
-                            ("--iters 0", "--iters"), ("--lr nan", "--lr"),
+                            ("--iters 0", "warn:--iters"), ("--lr nan", "--lr"),
                             ("--lr 0", "--lr"), ("--mem-budget-gb nan", "--mem-budget-gb"),
                             ("--mem-budget-gb -1", "--mem-budget-gb"),
                             ("--model coap --w coap=nan", "--w"), ("--w volsmpl=nan", "--w"), ("--w volsmpl=-1", "--w"),
@@ -218,7 +218,8 @@ def _flags():
                 act = "fit"
             elif base in (ROOM, FRAME):
                 act = "scene" if base == ROOM else "frame"
-            add(c, app, f"{act}.{name}", f"{base} {opt}", f"refuse:{kw}", need)
+            # 'warn:' marks a documented value that should be warned about, not refused (motion --iters 0)
+            add(c, app, f"{act}.{name}", f"{base} {opt}", kw if kw.startswith("warn:") else f"refuse:{kw}", need)
     for opt in ("--budget-mb -5", "--budget-mb 0", "--budget-mb nan"):
         add(c, "egohmr", f"sample.{opt.replace(' ', '_')}", f"sample {opt}", "refuse:--budget-mb", ["ego"],
             drop=("--no-max-batch",))
@@ -436,7 +437,7 @@ def complete_argv(inp: Input, argv: list[str], out: Path, work: Path) -> list[st
         if act in ("sample", "tune"):
             d += [("--render", ["0"])] if act == "sample" else []
             d += [("--model", ["volsmpl"])]
-        if act == "sample":
+        if act == "sample" and not scene:  # the user's frame measures no batch: the option does not apply there
             d += [("--no-max-batch", [])]
         if act in ("sample", "tune") and not scene:
             d += [("--frames", ["2"])]

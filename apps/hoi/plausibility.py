@@ -13,7 +13,8 @@ between the first-stage object and body within 1.23 m (median 0.13 m), the princ
     the first-stage object's nearest vertex from the first-stage body: > 3 m -> refused; > 1.5 m -> warning
     the principal point (cx, cy) outside the image -> refused (a camera matrix for another image size?);
         more than a quarter of the image from its centre -> warning
-    detected keypoints (confidence > 0) outside the image: more than half -> refused; any -> warning
+    detected keypoints (confidence > 0) outside the image: more than half -> refused; any -> warning; all within 3
+        pixels of one another (normalised [0, 1] coordinates) -> refused
     silhouette pixels outside the image: more than half -> refused
 
 After the fit (`judge_fit`), each fit gets a status, `converged` or one of
@@ -116,6 +117,9 @@ def _check_camera(case, name: str, warn) -> None:
         return (uv[:, 0] < 0) | (uv[:, 0] > W) | (uv[:, 1] < 0) | (uv[:, 1] > H)
 
     kp = case.keypoints_2d[case.keypoints_2d[:, 2] > 0]
+    if len(kp) > 1 and np.ptp(kp[:, :2], axis=0).max() < 3:
+        raise ValueError(f"{name}: the detected keypoints_2d lie within {np.ptp(kp[:, :2], axis=0).max():.2g} pixels "
+                         f"of one another: normalised [0, 1] coordinates? give pixels of the image [H, W] = [{H}, {W}]")
     if len(kp):
         out = outside(kp).mean()
         if out > 0.5:

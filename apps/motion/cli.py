@@ -203,7 +203,7 @@ def _run(args, opt: dict) -> int:
 
     models, ckpts, protocol, weights, frames = (opt[k] for k in ("models", "ckpts", "protocol", "weights", "frames"))
     out = Path(args.out)
-    warnings = []
+    warnings = list(opt.get("warnings", []))
     scenes = _scenes(args, frames, warnings)   # a user's scene checked here, before the networks load
     body = volsmpl.create_body().to(args.device)
     model = W.WalkModel(body)

@@ -3,13 +3,13 @@ given with a non-default value, are refused by volsmpl.apps.checks.applies), eve
 collision weights, the start and goal of a user's scene.
 
     mode = mode_of(args)          # 'motion tune', 'motion --scene' or 'motion without --scene' (generated rooms)
-    opt = check_options(args)     # {'models', 'ckpts', 'protocol', 'weights', 'frames', 'cf', 'mode'}; ValueError
+    opt = check_options(args)     # {'models', 'ckpts', 'protocol', 'weights', 'frames', 'cf', 'mode', 'warnings'}
 """
 from __future__ import annotations
 
 import math
 
-from volsmpl.apps.checks import applies, number
+from volsmpl.apps.checks import applies, number, warn
 
 PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
 ALL_SCENES = 15
@@ -105,6 +105,9 @@ def check_options(args) -> dict:
     applies(args, mode, USES[mode])
     frames = check_frames(args.frames)
     number(args.iters, "--iters", lo=0, what="Adam steps; 0: the straight start walk, not optimised")
+    warnings = []
+    if args.iters == 0:
+        warn("motion", "--iters 0: the walks are not optimised; the straight start walks are measured", warnings)
     number(args.lr, "--lr", lo=0, lo_open=True, what="Adam's learning rate")
     number(args.mem_budget_gb, "--mem-budget-gb", lo=0, lo_open=True, what="GB of memory")
     number(args.cost_frames, "--cost-frames", lo=1, what="frames batched in the cost measurement")
@@ -129,4 +132,4 @@ def check_options(args) -> dict:
     if args.published_cost and "coap" not in models:
         raise ValueError("--published-cost measures COAP as published: add coap to --model")
     return {"models": models, "ckpts": ckpts, "protocol": "tuned" if args.action == "tune" else "paper",
-            "weights": weights, "frames": frames, "cf": cf, "mode": mode}
+            "weights": weights, "frames": frames, "cf": cf, "mode": mode, "warnings": warnings}

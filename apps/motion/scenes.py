@@ -60,8 +60,11 @@ def check_endpoint(scene: MotionScene, xz, which: str) -> np.ndarray:
     P = scene.points
     d = np.linalg.norm(P[:, [0, 2]] - q, axis=1)
     if not (scene.floor & (d < FLOOR_REACH)).any():
+        low = float(np.percentile(P[:, 1], 1))
+        level = (f" (the floor level lies {scene.floor_y - low:.2f} m above the scene's lowest points: check "
+                 f"--floor-y)" if abs(scene.floor_y - low) > FLOOR_REACH else "")
         raise ValueError(f"{which} ({q[0]:.2f}, {q[1]:.2f}) is off the floor of scene '{scene.name}': no floor point "
-                         f"within {FLOOR_REACH} m; pick a position on the floor{_likely(scene)}")
+                         f"within {FLOOR_REACH} m; pick a position on the floor{level}{_likely(scene)}")
     h = P[:, 1] - scene.floor_y
     obst = (~scene.floor) & (h > 0.05) & (h < BODY_HEIGHT) & (d < BODY_CLEAR)
     if obst.any():

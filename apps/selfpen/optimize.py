@@ -45,8 +45,8 @@ PAPER = paper.rows("selfpen")
 # models: 0.1 with the COAP shipped before its catch-up, 0.03 since), 3 empty draws to stop, a stall stop after 10 steps without a new low (10 % below the best), and no backward
 # pass through the part encoder (code_grad False, Volume.selfpen_loss), all for both models alike.
 #: the statuses of a repair that worked or left the body as it was, and of one that failed (RepairResult)
-GOOD = ("no_intersection", "no_volume_points", "resolved", "stalled", "max_iters")
-FLAGGED = ("diverged", "worse_than_start")
+GOOD = ("no_intersection", "resolved", "stalled", "max_iters")
+FLAGGED = ("diverged", "worse_than_start", "no_volume_points")
 
 PRESETS = {
     "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1, "tau": 1.0, "patience": 0, "stall_rtol": 0.0,
@@ -110,9 +110,10 @@ class RepairResult:
     """Outcome of one case. status: 'no_intersection' (no triangle collision: left unchanged),
     'no_volume_points' (the volume finds no penetration: left unchanged), 'resolved' (the volume
     finds no penetration after `iterations` steps), 'stalled' (the penetration term found no new low for
-    `patience` steps), 'max_iters', and the two of a repair that failed (`FLAGGED`, why in `status_why`):
-    'diverged' (a step made the pose or the loss non-finite; the pose before it is kept) and 'worse_than_start'
-    (more pose-induced colliding triangle pairs after than before)."""
+    `patience` steps), 'max_iters'. Flagged (`FLAGGED`, why in `status_why`): 'no_volume_points' (triangles
+    collide but the volume sees nothing to push apart: not repaired), 'diverged' (a step made the pose or the loss
+    non-finite; the pose before it is kept) and 'worse_than_start' (more pose-induced colliding triangle pairs after
+    than before)."""
 
     name: str
     status: str
@@ -196,6 +197,9 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
     res.body_pose = final_pose.tolist()
     if res.status == "diverged":
         res.status_why = "a step made the pose or the loss non-finite (kept: the pose before it); lower --lr"
+    elif res.status == "no_volume_points":
+        res.status_why = (f"{res.collisions_before} colliding triangle pairs, but the volume finds no penetration "
+                          f"to push apart: left as it was")
     elif res.collisions_after > res.collisions_before:
         res.status_why = (f"colliding triangle pairs {res.collisions_before} -> {res.collisions_after} (the "
                           f"optimiser stopped as {res.status!r})")

@@ -3,6 +3,8 @@
 options each mode does not read refused, every number checked, before any work."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -219,6 +221,22 @@ def test_cli_refuses_a_scene_in_the_wrong_units_or_up_axis_before_the_networks(r
     assert main(base + ["--scene", str(tmp_path / "z.npy"), f"--start={s[0]},{-s[1]}", f"--goal={g[0]},{-g[1]}"]) == 2
     io = capsys.readouterr()
     assert "give --up z" in io.err and "floor: axis z, level 0.00 m, 36% of points" in io.out
+
+
+def test_a_floor_level_given_at_the_walls_top_is_named_and_iters_0_warned(room, tmp_path, capsys, no_work):
+    """--floor-y 2.5 on a room whose floor is at 0: the start is off that floor, and the refusal names --floor-y with
+    the 2.5 m between the given level and the scene's lowest points. --iters 0 (documented: the straight walks are
+    measured) is warned about before the refusal."""
+    from volsmpl.cli import main
+
+    pts, (s, g) = room
+    np.save(tmp_path / "room.npy", pts)
+    assert main(["motion", "--model", "mesh", "--scene", str(tmp_path / "room.npy"), f"--start={s[0]},{s[1]}",
+                 f"--goal={g[0]},{g[1]}", "--floor-y", "2.5", "--iters", "0", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "volsmpl motion: warning: --iters 0: the walks are not optimised" in err
+    assert re.search(r"off the floor .*the floor level lies 2.\d\d m above the scene's lowest points: check --floor-y",
+                     err)
 
 
 def test_cli_refuses_an_out_holding_another_apps_results(tmp_path, capsys, no_work):

@@ -242,6 +242,18 @@ def test_repair_loop_stops_when_no_points_remain(body):
     assert ("max_iters" in r2.status_why) == worse
 
 
+def test_intersections_the_volume_cannot_see_are_flagged_not_repaired(body):
+    """A volume that finds no penetration at the first draw leaves the body as it was: status 'no_volume_points',
+    one of the flagged statuses, with the triangle count in its reason."""
+    from volsmpl.apps.selfpen.optimize import FLAGGED
+
+    case = C.load_cases(names=["hands_through_thighs"])[0]
+    r = repair_case(body, _StubVolume(k=0), case, SelfPenConfig(stop_checks=1))
+    assert r.status == "no_volume_points" and r.status in FLAGGED and r.iterations == 0
+    assert r.collisions_after == r.collisions_before > 0
+    assert r.status_why.startswith(f"{r.collisions_before} colliding triangle pairs, but the volume finds no penetration")
+
+
 def test_repair_stops_when_the_penetration_term_stalls(body):
     case = C.load_cases(names=["hands_through_thighs"])[0]
     values = [3.0, 2.0, 2.5, 2.2, 2.1, 1.0, 0.5]
