@@ -38,6 +38,9 @@ CAMERA_TILT_DEG = 75.0
 #: a floor estimate is clear where the up direction's asymmetry is at least FLOOR_MIN, both horizontal directions'
 #: at most WALLS_MAX, and each horizontal direction is faced by at least FLAT_SIDES of the flat points (floor_up)
 FLOOR_MIN, WALLS_MAX, FLAT_SIDES = 0.15, 0.10, 0.03
+#: a principal point farther than this share of the image from its centre is warned about (calibrated cameras: a
+#: few %; the generated frames: at the centre; a [W, H] image_size of a 4:3 image: 17 %)
+PP_WARN = 0.1
 #: horizontal field of view (degrees): refused outside FOV_REFUSE_DEG, a warning outside FOV_USUAL_DEG
 FOV_REFUSE_DEG = (3.0, 170.0)
 FOV_USUAL_DEG = (30.0, 120.0)
@@ -192,6 +195,11 @@ def check_camera(frame, where: str, warnings: list | None = None) -> None:
     if not 1 / ASPECT_REFUSE <= fy / fx <= ASPECT_REFUSE:
         raise ValueError(f"{where}: 'K' has fx = {fx:g} and fy = {fy:g} px, pixels {fy / fx:.2f} times as tall as "
                          f"wide: a camera matrix for another image size? give fx and fy of this image's pixels")
+    cx, cy = float(K[0, 2]), float(K[1, 2])
+    if abs(cx - W / 2) > PP_WARN * W or abs(cy - H / 2) > PP_WARN * H:
+        warn("egohmr", f"{where}: 'K': the principal point ({cx:g}, {cy:g}) lies far from the centre ({W / 2:g}, "
+                       f"{H / 2:g}) of image_size [H, W] = [{H:g}, {W:g}]: image_size given as [W, H]? or a K of "
+                       f"another image size?", warnings)
     if not FOV_USUAL_DEG[0] <= fov <= FOV_USUAL_DEG[1]:
         warn("egohmr", f"{where}: 'K' gives a {fov:.0f} degree horizontal field of view; the network was trained on "
                        f"60-75 degrees (apps/egohmr/data.py), so its samples may be poor", warnings)

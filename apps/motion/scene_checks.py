@@ -74,9 +74,6 @@ def read_points(path, option: str = "--scene", units: str = "m", n_surface: int 
         return read_scan(p, units, n_surface, seed, option=option)
     except ValueError as e:
         msg = " ".join(str(e).split())
-        if "allow_pickle" in msg:
-            raise ValueError(f"{option} {path}: the .npy holds pickled Python objects, not numbers; save the (N, 3) "
-                             f"coordinates as a number array (np.save(path, xyz.astype(float)))") from None
         if msg.startswith(f"{option} "):   # read_scan named the file and the fix, or the reader's error
             raise ValueError(msg if "cannot read it (" not in msg else f"{msg}; give {FORMATS}") from None
         raise ValueError(f"{option} {path}: {msg}") from None   # check_cloud: empty, NaN, wrong shape

@@ -41,10 +41,11 @@ def read_scan(path, units: str = "m", n_surface: int = 65536, seed: int = 0, opt
         raise ValueError(f"{option} {path}: no such file")
     suffix = p.suffix.lower()
     if suffix in (".npy", ".npz", ".txt", ".csv"):
+        if suffix in (".npy", ".npz"):
+            z = _load_numbers(p, path, option)
         if suffix == ".npy":
-            arr = np.load(p)
+            arr = z
         elif suffix == ".npz":
-            z = np.load(p)
             if "points" not in z.files and len(z.files) != 1:  # never guess: the first array may be the colours
                 raise ValueError(f"{option} {path}: the .npz holds arrays {', '.join(z.files)} and none is named "
                                  f"'points'; save the (N, 3) coordinates as points=... (np.savez(path, points=xyz))")
@@ -59,6 +60,17 @@ def read_scan(path, units: str = "m", n_surface: int = 65536, seed: int = 0, opt
     else:
         pts = check_cloud(_geometry_points(p, path, n_surface, seed, option))
     return pts * UNITS[units]
+
+
+def _load_numbers(p: Path, path, option: str):
+    """np.load of a .npy / .npz that holds numbers; a pickled one (Python objects) is refused naming the file."""
+    try:
+        return np.load(p, allow_pickle=False)
+    except ValueError as e:
+        if "allow_pickle" in str(e):
+            raise ValueError(f"{option} {path}: the file holds pickled Python objects, not numbers; save the (N, 3) "
+                             f"coordinates as a number array (np.save(path, xyz.astype(float)))") from None
+        raise
 
 
 def _geometry_points(p: Path, path, n_surface: int, seed: int, option: str) -> np.ndarray:

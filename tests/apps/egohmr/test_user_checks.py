@@ -305,3 +305,27 @@ def test_deep_ratio_and_diverged_pose_of_a_hand_made_body():
     joints = torch.zeros(1, 24, 3)
     rec = measure(x, joints, v.float(), cube.faces, torch.zeros(1, 24, 3), pts.float(), inside)[0]
     assert rec["finite"] is False and judge(rec)[0] == "diverged"
+
+
+def test_a_principal_point_off_the_centre_is_warned_about():
+    """A 640 x 480 camera (cx 320, cy 240) with image_size given as [W, H] = [640, 480] read as [H, W]: cx lies
+    80 px = 17 % of the 480 px width from the centre (limit 10 %): a warning naming image_size; the true [480, 640]:
+    none."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from volsmpl.apps.egohmr.user_checks import check_camera
+
+    K = np.array([[500.0, 0, 320.0], [0, 500.0, 240.0], [0, 0, 1]])
+    kp = np.stack([np.linspace(200, 300, 22), np.linspace(100, 400, 22)], 1)
+
+    def warnings_of(size):
+        frame = SimpleNamespace(K=K, image_size=size, conf=np.ones(22), keypoints=kp)
+        out = []
+        check_camera(frame, "--frame f.json", out)
+        return out
+
+    assert warnings_of((480, 640)) == []
+    assert any("principal point (320, 240) lies far from the centre (240, 320)" in w and "[W, H]" in w
+               for w in warnings_of((640, 480)))

@@ -82,11 +82,11 @@ def test_a_camera_for_another_image_is_refused(body, tmp_path):
     other = {**d, "camera": {**d["camera"], "K": [[1800.0, 0, 959.5], [0, 1800.0, 539.5], [0, 0, 1]]}}
     with pytest.raises(ValueError, match=r"principal point \(959.5, 539.5\) lies outside the image"):
         _checked(body, tmp_path, other)
-    # the principal point 40 % of the width from the centre, inside the image: a warning (the limit is 25 %)
+    # the principal point 40 % of the width from the centre, inside the image: a warning (the limit is 10 %)
     off = {**d, "camera": {**d["camera"], "K": [[600.0, 0, 575.5], [0, 600.0, 239.5], [0, 0, 1]]}}
     assert any("far from the image centre" in w for w in _checked(body, tmp_path, off))
     unit = {**d, "keypoints_2d": [[u / 640, v / 480, c] for u, v, c in d["keypoints_2d"]]}  # normalised to [0, 1]
-    with pytest.raises(ValueError, match=r"within 0.\d+ pixels of one another: normalised \[0, 1\] coordinates\?"):
+    with pytest.raises(ValueError, match=r"keypoints \(keypoints_2d\) lie within 0.\d+ pixels of one another: normalised \[0, 1\] coordinates\?"):
         _checked(body, tmp_path, unit)
     far_kp = {**d, "keypoints_2d": [[u * 4, v * 4, c] for u, v, c in d["keypoints_2d"]]}
     with pytest.raises(ValueError, match="keypoints_2d lie outside the image"):
