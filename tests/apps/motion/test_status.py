@@ -34,6 +34,10 @@ def _rec(w=1.0, **over):
     ({"collision_frames_pct": 76.0}, "colliding", "collides in 76% of frames"),
     ({"collision_cm": 3.1, "collision_obstacles_cm": 3.0}, "colliding", "3.10 cm deep"),
     ({"collision_cm": 3.1, "collision_obstacles_cm": 0.1}, "colliding", "mostly with the floor: check --floor-y"),
+    # through an obstacle: deeper than 8 cm while colliding in at least 40 % of the frames
+    ({"max_depth_cm": 10.3, "collision_frames_pct": 50.0}, "colliding", "passes 10.3 cm deep into the scene"),
+    ({"max_depth_cm": 7.9, "collision_frames_pct": 50.0}, "reached", ""),
+    ({"max_depth_cm": 10.3, "collision_frames_pct": 39.0}, "reached", ""),
     # the collision term: 1.5 x 0.05 + 0.001 = 0.076 is the most an optimised walk may end with
     ({"final_terms": {"collision": 0.0755}}, "reached", ""),
     ({"final_terms": {"collision": 0.0765}}, "worse_than_start", "rose from 0.05 (straight start walk) to 0.0765"),
