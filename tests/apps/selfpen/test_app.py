@@ -295,7 +295,10 @@ def test_repair_random_volume_and_tpose_unchanged(body, tiny_config):
     vol = volsmpl.attach_volume(body, pretrained=False, config=tiny_config)
     case = C.load_cases(names=["knee_into_chest"])[0]
     r = repair_case(body, vol, case, SelfPenConfig(max_iters=2, n_points=64))
-    assert r.status in ("no_volume_points", "resolved", "max_iters") and r.iterations <= 2
+    # an untrained volume pushes at random: a repair that ends with more colliding pairs says so
+    worse = r.collisions_after > r.collisions_before
+    assert r.status in (("worse_than_start",) if worse else ("no_volume_points", "resolved", "max_iters"))
+    assert r.iterations <= 2
     assert r.collisions_before == case.collisions and np.isfinite(r.body_pose).all()
     tpose = C.Case("t_pose", case.betas, torch.zeros(3), torch.zeros(69))
     r = repair_case(body, vol, tpose, SelfPenConfig())
