@@ -43,7 +43,7 @@ def _setup(args, split: str):
     return body, net, meta, frames, prep, scenes
 
 
-def _volumes(args, guides: list[str], ckpts: dict, device) -> dict:
+def guide_volumes(args, guides: list[str], ckpts: dict, device) -> dict:
     """guide -> its volume (None for 'none'), on a body of their own (volsmpl.apps.table.volumes); ckpts: the
     checkpoints `check_common` checked."""
     import volsmpl
@@ -52,7 +52,7 @@ def _volumes(args, guides: list[str], ckpts: dict, device) -> dict:
     return volumes(volsmpl.create_body(), guides, ckpts, device, encoder_bf16=args.encoder_bf16)
 
 
-def _config(args, guides: list[str], ckpts: dict, scales: dict, frames: int, split: str) -> dict:
+def run_config(args, guides: list[str], ckpts: dict, scales: dict, frames: int, split: str) -> dict:
     """What a sample or tune result records of its settings (results.json's config)."""
     from volsmpl.apps.table import checkpoint_names
 
@@ -80,7 +80,7 @@ def run_sample(args, ckpts: dict) -> int:
     tuning = read_json(args.tuned, "the tuning file", "--tuned") if args.tuned else None
     out = Path(args.out)
     body, net, meta, frames, prep, scenes = _setup(args, args.split)
-    vols = _volumes(args, guides, ckpts, body.v_template.device)
+    vols = guide_volumes(args, guides, ckpts, body.v_template.device)
     store = CaseRecords(out, "egohmr", resume=args.resume)
     summary, records, options, batches = {}, {}, {}, {}
     # the no-diffusion baseline: the regressor's own pose, scored by the same tests (not a guide: no row in Table 4)
@@ -88,7 +88,7 @@ def run_sample(args, ckpts: dict) -> int:
     reg.pop("s_per_frame")
     print(f"regressor (no diffusion): MPJPE {reg['mpjpe_mm']:.1f} mm (vis. {reg['mpjpe_visible_mm']:.1f}, invis. "
           f"{reg['mpjpe_invisible_mm']:.1f})  collision {reg['collision_ratio']:.4f}")
-    config = _config(args, guides, ckpts, scales, len(frames), args.split)
+    config = run_config(args, guides, ckpts, scales, len(frames), args.split)
     config["checkpoint_meta"] = {k: meta.get(k) for k in ("step", "validation", "train_frames", "seconds")}
     for g in guides:
         opts = options_of(args, scales[g])
@@ -177,7 +177,7 @@ def run_tune(args, ckpts: dict) -> int:
     if args.split == "test":
         print("tune: tuning runs on the val split (the test split is for reporting only)")
     body, net, meta, frames, prep, scenes = _setup(args, split)
-    vols = _volumes(args, guides, ckpts, body.v_template.device)
+    vols = guide_volumes(args, guides, ckpts, body.v_template.device)
     base = summarize(sample_frames(net, body, frames, prep, None, None, args.batch, args.seed, scenes))
     print(f"{len(frames)} {split} frames; unguided first")
     rows = [{"guide": "none", "scale": 0.0, **base}]
@@ -188,7 +188,7 @@ def run_tune(args, ckpts: dict) -> int:
         doc = {"split": split, "frames": len(frames), "rule": f"lowest collision ratio with MPJPE within "
                f"{TUNE_MPJPE_SLACK_MM} mm of the unguided sampler's", "factors": factors,
                "paper_scales": PAPER_SCALE, "encoder_bf16": args.encoder_bf16, "rows": rows, "best": best,
-               "complete": complete, "config": _config(args, guides, ckpts, {}, len(frames), split),
+               "complete": complete, "config": run_config(args, guides, ckpts, {}, len(frames), split),
                "meta": machine_info(args.device)}
         return write_results(args.out, doc, "tune.json")
 
@@ -226,4 +226,4 @@ def format_table(summary: dict) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["run_sample", "run_tune", "run_user_frame", "format_table"]
+__all__ = ["run_sample", "run_tune", "run_user_frame", "format_table", "guide_volumes", "run_config"]

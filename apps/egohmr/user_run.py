@@ -64,7 +64,7 @@ def run_user_frame(args, ckpts: dict) -> int:
     from .metrics import inside_masks
     from .options import options_of, parse_guides, scales_of
     from .pose import pose_body_finite
-    from .run import _config, _volumes
+    from .run import guide_volumes, run_config
     from .status import GOOD, judge, measure
     from .train import load_model
 
@@ -94,8 +94,8 @@ def run_user_frame(args, ckpts: dict) -> int:
     faces = torch.as_tensor(body.faces, device=dev)
     summary, records, panels = {}, {}, []
     cam = camera_of(frame.K, frame.image_size)
-    vols = _volumes(args, guides, ckpts, dev)
-    config = {**_config(args, guides, ckpts, scales, 1, "user"), "frame": str(args.frame), "scene": str(args.scene),
+    vols = guide_volumes(args, guides, ckpts, dev)
+    config = {**run_config(args, guides, ckpts, scales, 1, "user"), "frame": str(args.frame), "scene": str(args.scene),
               "units": args.units, "up": args.up}
     figure = f"frame_{frame.name}.png"
     for g in guides:
