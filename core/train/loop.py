@@ -349,7 +349,7 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
             dist.all_reduce(flag)
             over = bool(flag.item() > 0)
         if rank == 0 and ((step + 1) % cfg.ckpt_every == 0 or step + 1 == end or over):
-            save_training_state(out_dir, step + 1, volume, opt, cfg, {"loss": loss, "train_seconds": round(used, 1)}, ema)
+            save_training_state(out_dir, step + 1, volume, opt, cfg, {"loss": loss, "train_seconds": round(used, 3)}, ema)
         if over:
             break
     if logf:
