@@ -102,15 +102,12 @@ def summarize(results: list) -> dict:
 
 def _cases(args, split: str, database) -> list:
     """The database cases of `split` that --cases selects; one line naming the fix when there is no database."""
-    from volsmpl.apps.checks import read_json
-
     folder = Path(args.db) if args.db else database.database_folder(args.seed)
     if not (folder / "index.json").is_file():
         raise FileNotFoundError(f"no interaction database in {folder}; build it with `volsmpl hoi make-db"
                                 f"{' --db ' + str(folder) if args.db else ''} --seed {args.seed}`")
-    loaded = database.load_database(folder)  # the index checked there
-    index = read_json(folder / "index.json", "the database index", "--db")
-    cases = select_cases(loaded, {c["name"]: c for c in index["cases"]}, split, args.cases)
+    loaded = database.load_database(folder)  # reads and checks the index; each case carries its split
+    cases = select_cases(loaded, {c.name: {"split": c.split} for c in loaded}, split, args.cases)
     if not cases:
         raise ValueError(f"no cases selected (split {split!r}, cases {args.cases!r})")
     return cases
