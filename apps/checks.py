@@ -25,7 +25,7 @@ from pathlib import Path
 __all__ = ["ALWAYS", "applies", "number", "read_json", "safe_name", "warn", "claim_out", "strict_json"]
 
 #: options every mode takes: the subcommand and action, the traceback switch and the parser itself
-ALWAYS = frozenset({"command", "action", "debug", "_run", "_parser"})
+ALWAYS = frozenset({"command", "action", "debug", "_run", "_parser", "quiet"})
 
 
 def _flag(dest: str) -> str:

@@ -22,6 +22,9 @@ The options:
                              weights; compute only the others
   --render N                 figures of the first N cases (0: none)
   --device cpu|cuda          where the work runs
+  --save-meshes              write the fitted bodies (and objects) of every case as mesh files under OUT/meshes/
+                             (a user's own case writes them always; a table run only with this flag)
+  --quiet                    no progress bars (they show only on a terminal anyway: none in a log file)
 
 The envelope: {app, config, summary, paper, cases: {kind: [records]}, figures, meta, flagged, warnings} and, after them, what an app
 adds of its own (motion's tuning and paired differences, egohmr's regressor row and batch sizes).
@@ -58,6 +61,11 @@ def add_common(p, *, out: str | None, model: str = "volsmpl,coap,mesh", none: bo
                                   "case and weights; compute only the others (a stopped run continues)")
     p.add_argument("--render", type=int, default=render, help=f"figures of the first N cases (0: none; default {render})")
     p.add_argument("--device", default="cpu", choices=["cpu", "cuda"], help="where the work runs (default cpu)")
+    p.add_argument("--save-meshes", action="store_true",
+                   help="write every case's fitted bodies (and objects) as .ply files under OUT/meshes/, in the "
+                        "input's units and axes (a user's own case writes them always)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bars (shown only on a terminal: never in a log file)")
 
 
 def parse_kinds(text: str, none: bool = False) -> list[str]:

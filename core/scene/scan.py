@@ -112,4 +112,14 @@ def to_y_up(points: np.ndarray, up: str) -> np.ndarray:
     raise ValueError(f"--up must be 'y' or 'z', got {up!r}")
 
 
-__all__ = ["UNITS", "check_cloud", "read_scan", "to_y_up"]
+def from_y_up(points: np.ndarray, up: str) -> np.ndarray:
+    """The inverse of `to_y_up`: points of our Y-up frame in a 'y'-up or 'z'-up file's axes, (x, y, z) -> (x, -z, y)
+    for 'z'. Shape: (N, 3) -> (N, 3)."""
+    if up == "y":
+        return points
+    if up == "z":
+        return np.stack([points[:, 0], -points[:, 2], points[:, 1]], 1)
+    raise ValueError(f"--up must be 'y' or 'z', got {up!r}")
+
+
+__all__ = ["UNITS", "check_cloud", "from_y_up", "read_scan", "to_y_up"]
