@@ -24,8 +24,8 @@ unusual is a warning (stderr and results.json's `warnings`).
 from __future__ import annotations
 
 import numpy as np
-
 from volsmpl.apps.checks import warn
+from volsmpl.scene.floor import floor_up
 
 #: a scene's robust extent (m) outside this range is refused: no room a person stands in
 EXTENT_REFUSE = (0.5, 2000.0)
@@ -35,9 +35,6 @@ EXTENT_USUAL, ROOM_M = (1.5, 200.0), 6.0
 UP_TOL_DEG = 25.0
 #: without world_to_camera: the floor's normal may lie this far (degrees) from the camera's vertical
 CAMERA_TILT_DEG = 75.0
-#: a floor estimate is clear where the up direction's asymmetry is at least FLOOR_MIN, both horizontal directions'
-#: at most WALLS_MAX, and each horizontal direction is faced by at least FLAT_SIDES of the flat points (floor_up)
-FLOOR_MIN, WALLS_MAX, FLAT_SIDES = 0.15, 0.10, 0.03
 #: a principal point farther than this share of the image from its centre is warned about (calibrated cameras: a
 #: few %; the generated frames: at the centre; a [W, H] image_size of a 4:3 image: 17 %)
 PP_WARN = 0.1
@@ -85,65 +82,6 @@ def check_extent(points: np.ndarray, units: str, path, warnings: list | None = N
     return ext
 
 
-def point_normals(points: np.ndarray, k: int = 16) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals by PCA of each point's k nearest neighbours and their flatness (smallest eigenvalue over the
-    sum: 0 on a plane, 1/3 in a ball). Shape: (N, 3) -> (N, 3), (N,)."""
-    from scipy.spatial import cKDTree
-
-    _, idx = cKDTree(points).query(points, k=min(k, len(points)))
-    nb = points[idx] - points[idx].mean(1, keepdims=True)
-    w, v = np.linalg.eigh(np.einsum("nki,nkj->nij", nb, nb))
-    return v[:, :, 0], w[:, 0] / np.maximum(w.sum(1), 1e-30)
-
-
-def floor_up(points: np.ndarray, n: int = 20000, seed: int = 0, cone_deg: float = 15.0):
-    """The scene's up direction from its floor (module docstring): (up (3,) unit, or None when the scan does not
-    show a floor clearly; the up direction's asymmetry; the largest asymmetry across the horizontal directions).
-
-    A direction d's asymmetry: the fraction of the flat points whose normal (turned towards the centre of the
-    scene's box) lies within `cone_deg` of d minus that within `cone_deg` of -d. The up direction is the one of
-    largest asymmetry (the floor and the seats and tops below the middle face up). It is clear only where the scan
-    shows a room around it: flat surfaces facing both horizontal directions (FLAT_SIDES of the flat points each,
-    walls) that cancel (asymmetry at most WALLS_MAX: walls on opposite sides), while the up direction's asymmetry
-    is at least FLOOR_MIN. A view of a single wall, or of a corner, is not clear: a wall cannot be told from a floor.
-    Shape: points (N, 3) in the file's frame (a random `n` of them are used)."""
-    rng = np.random.default_rng(seed)
-    p = points[rng.choice(len(points), n, replace=False)] if len(points) > n else np.asarray(points, np.float64)
-    if len(p) < 50:
-        return None, 0.0, 0.0
-    nrm, flat = point_normals(p)
-    keep = flat < 0.02
-    if keep.sum() < 50:
-        return None, 0.0, 0.0
-    nrm, p = nrm[keep], p[keep]
-    lo, hi = np.percentile(p, [1, 99], axis=0)
-    nrm *= np.where(((0.5 * (lo + hi) - p) * nrm).sum(1) < 0, -1.0, 1.0)[:, None]   # towards the box's centre
-    c = np.cos(np.radians(cone_deg))
-
-    def facing(d):   # (fraction within the cone of d, of -d) for directions d (M, 3)
-        dots = d @ nrm.T
-        return (dots > c).mean(1), (dots < -c).mean(1)
-
-    cand = np.concatenate([np.eye(3), -np.eye(3), nrm[rng.choice(len(nrm), min(256, len(nrm)), replace=False)]])
-    pos, neg = facing(cand)
-    asym = pos - neg
-    best = int(asym.argmax())
-    up, a = cand[best], float(asym[best])
-    side = np.abs(cand @ up) < np.sin(np.radians(cone_deg))     # horizontal candidates
-    if not side.any():
-        return None, a, 0.0
-    w1 = cand[side][int((pos + neg)[side].argmax())]
-    w1 = w1 - (w1 @ up) * up
-    w1 /= np.linalg.norm(w1)
-    walls = np.stack([w1, np.cross(up, w1)])
-    wpos, wneg = facing(walls)
-    other = float(np.abs(wpos - wneg).max())
-    if a < FLOOR_MIN or other > WALLS_MAX or (wpos + wneg).min() < FLAT_SIDES:
-        return None, a, other
-    u = nrm[nrm @ up > c].mean(0)
-    return u / np.linalg.norm(u), a, other
-
-
 def _angle(u: np.ndarray, axis: int) -> float:
     """Degrees between the line of u and a coordinate axis (0-90)."""
     return float(np.degrees(np.arccos(np.clip(abs(u[axis]), 0.0, 1.0))))
@@ -154,7 +92,7 @@ def check_up(points: np.ndarray, up: str, world: bool, path, warnings: list | No
     clearly faces along the other axis --up offers (naming it) or along x; warn when no floor stands out or it is
     tilted. world: the frame file gives 'world_to_camera' (else the file is in camera coordinates). Returns the
     estimated up direction (file axes) or None."""
-    u, a, other = floor_up(points, seed=seed)
+    u, _, _ = floor_up(points, seed=seed)
     where = f"--scene {path}"
     if u is None:
         warn("egohmr", f"{where}: the scan shows no floor with walls on opposite sides (a partial view?), so --up "
@@ -237,4 +175,4 @@ def check_camera_place(frame, points: np.ndarray, where: str, warnings: list | N
 
 
 __all__ = ["EXTENT_REFUSE", "EXTENT_USUAL", "UP_TOL_DEG", "CAMERA_TILT_DEG", "robust_extent", "check_extent",
-           "point_normals", "floor_up", "check_up", "check_camera", "check_camera_place"]
+           "check_up", "check_camera", "check_camera_place"]

@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from volsmpl.scene.floor import FLOOR_BAND_M, estimate_floor
 
-__all__ = ["FORMATS", "MAX_SPAN_M", "MIN_SPAN_M", "LARGE_SPAN_M", "LOW_HEIGHT_M", "FLOOR_BAND_M", "CLEAR_RATIO",
-           "FloorEstimate", "read_points", "span", "units_fix", "estimate_floor", "check_scene"]
+__all__ = ["FORMATS", "MAX_SPAN_M", "MIN_SPAN_M", "LARGE_SPAN_M", "LOW_HEIGHT_M", "read_points", "span", "units_fix",
+           "check_scene"]
 
 FORMATS = ("a mesh or point cloud (ply, obj, off, stl, glb, xyz, ...: what trimesh reads) or an array of x y z "
            "points (.npy, .npz with 'points', .txt, .csv)")
@@ -40,8 +40,6 @@ MAX_SPAN_M = 2000.0    # no walkable scene is 2 km across: a file in other units
 MIN_SPAN_M = 0.5       # nor smaller than half a metre
 LARGE_SPAN_M = 200.0   # larger than a building: unusual
 LOW_HEIGHT_M = 1.5     # lower than a person: unusual
-FLOOR_BAND_M = 0.05    # the floor slab: points within 5 cm of an axis's 1st-percentile level
-CLEAR_RATIO = 1.5      # the floor axis's score is at least 1.5x every other axis's
 AXES = "xyz"
 _UNIT_NAMES = {"m": "metres", "cm": "centimetres", "mm": "millimetres"}
 ROOM_SIZE_M = 8.0      # a typical room's largest extent: the units fix brings the scene nearest this
@@ -99,45 +97,6 @@ def units_fix(extent_m: float, units: str) -> str | None:
         return None
     best = min(fits, key=lambda u: abs(math.log(fits[u] / ROOM_SIZE_M)))
     return None if best == units else best
-
-
-@dataclass
-class FloorEstimate:
-    """The floor found in a cloud: `axis` ('x', 'y' or 'z': the file's axis across the floor), `level` (metres:
-    the axis's 1st-percentile value), `share` (the points within FLOOR_BAND_M of it), `shares` and `scores` per
-    axis, `clear` (the best score is CLEAR_RATIO times the next or more)."""
-
-    axis: str
-    level: float
-    share: float
-    clear: bool
-    shares: dict = field(default_factory=dict)
-    scores: dict = field(default_factory=dict)
-
-    def line(self) -> str:
-        """One line for the console: 'floor: axis y, level 0.00 m, 36% of points'."""
-        return (f"floor: axis {self.axis}, level {self.level:.2f} m, {100 * self.share:.0f}% of points"
-                + ("" if self.clear else " (unclear: " + ", ".join(f"{a} {100 * s:.0f}%" for a, s in
-                                                                   self.shares.items()) + ")"))
-
-
-def estimate_floor(points: np.ndarray, band: float = FLOOR_BAND_M) -> FloorEstimate:
-    """Which axis of a cloud (metres, its own axes) is up: the one across the floor. Per axis, the share of the
-    points within `band` of its 1st-percentile level (its lowest slab: the floor, or a wall) minus half the share
-    within `band` of its 99th-percentile level (the opposite slab: walls come in pairs, a floor rarely has a
-    ceiling as full); the best score is the floor's, clear when it is CLEAR_RATIO times the next or more."""
-    p = np.asarray(points, dtype=np.float64)
-    shares, scores, levels = {}, {}, {}
-    for i, a in enumerate(AXES):
-        v = p[:, i]
-        lo, hi = np.percentile(v, [1.0, 99.0])
-        low = float(np.mean(np.abs(v - lo) <= band))
-        high = float(np.mean(np.abs(v - hi) <= band))
-        shares[a], levels[a], scores[a] = low, float(lo), max(low - 0.5 * high, 0.0)
-    order = sorted(AXES, key=lambda a: -scores[a])
-    best, second = order[0], order[1]
-    clear = len(p) >= 100 and scores[best] > 0 and scores[best] >= CLEAR_RATIO * scores[second]
-    return FloorEstimate(best, levels[best], shares[best], bool(clear), shares, scores)
 
 
 def check_scene(points: np.ndarray, path, up: str, units: str, floor_y=None, warn=None,

@@ -14,6 +14,9 @@
   torch conversion.
 - `camera`: pinhole cameras on kornia (OpenCV axes): intrinsics from a field of view, look-at extrinsics,
   projection with depth and visibility, back-projection; batched and differentiable.
+- `scan`: a user's scene file (any format trimesh reads, or an array of points) in metres and Y up: `read_scan`,
+  and `open_scan` for scenes of any size, whose points are taken inside a region at a spacing in metres.
+- `floor`: the floor of a cloud: the up axis (`estimate_floor`, `floor_up`) and the floor's level (`floor_level`).
 - `cache`: the user cache folder for generated data (`cached(name, version, seed, build_fn)`, atomic writes; versions
   that carry a digest of the generator's source: `code_version`).
 

@@ -120,7 +120,7 @@ def test_scene_turned_z_up_is_refused_without_up_z(files, capsys, tmp_path):
 
 
 def test_floor_estimate_needs_a_room_around_it():
-    from volsmpl.apps.egohmr.user_checks import floor_up
+    from volsmpl.scene.floor import floor_up
 
     room = box_room()
     up, a, other = floor_up(room)

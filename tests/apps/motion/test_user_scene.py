@@ -10,6 +10,7 @@ import pytest
 
 from volsmpl.apps.motion import scene_checks as C
 from volsmpl.apps.motion import scenes as S
+from volsmpl.scene.floor import estimate_floor
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +54,7 @@ def test_floor_axis_of_a_hand_made_room(perm, axis):
     4,635 / 45,000 = 0.103. The floor is found across whichever axis it lies."""
     p = _box_room(6.0, 4.0, 2.4)[:, perm]
     assert len(p) == 45000
-    est = C.estimate_floor(p)
+    est = estimate_floor(p)
     assert est.axis == axis and est.clear
     assert est.level == pytest.approx(0.0, abs=1e-9)
     assert est.share == pytest.approx(15500 / 45000) and est.scores[axis] == pytest.approx(1 / 3)
@@ -67,10 +68,10 @@ def test_floor_axis_with_a_ceiling_and_an_unclear_corridor():
     0.129 against the long wall's (9,420 - 4,710) / 60,000 = 0.0785, still clear (1.65x). A 10 x 1 m corridor
     whose long walls (15,000 points each) outsize its floor (6,250) scores its wall 0.196 and its floor 0.159:
     unclear, so never refused, and a warning when the best axis is not --up."""
-    est = C.estimate_floor(_box_room(6.0, 4.0, 2.4, ceiling=True))
+    est = estimate_floor(_box_room(6.0, 4.0, 2.4, ceiling=True))
     assert est.axis == "z" and est.clear and est.scores["z"] == pytest.approx(7750 / 60000)
     corridor = _box_room(10.0, 1.0, 2.4)
-    est = C.estimate_floor(corridor)
+    est = estimate_floor(corridor)
     assert est.axis == "y" and not est.clear
     assert est.scores["y"] == pytest.approx(15370 / 2 / 39250) and est.scores["z"] == pytest.approx(6250 / 39250)
     warnings = []
@@ -82,7 +83,7 @@ def test_the_generated_room_turned_z_up(room, tmp_path):
     """The y-up room is found y-up; the same room written z-up is refused without --up z (naming the fix), read
     with it (the same cloud as the y-up file), and with --floor-y the disagreement is only a warning."""
     pts, _ = room
-    assert C.estimate_floor(pts).axis == "y" and C.estimate_floor(_z_up(pts)).axis == "z"
+    assert estimate_floor(pts).axis == "y" and C.estimate_floor(_z_up(pts)).axis == "z"
     np.save(tmp_path / "room_z.npy", _z_up(pts))
     with pytest.raises(ValueError, match=r"room_z\.npy: the floor lies across axis z .* but --up is y: "
                                          r"give --up z") as e:
