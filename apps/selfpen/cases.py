@@ -10,6 +10,9 @@ bit-identically) and verifies with the exact triangle counter that the body self
     python -m volsmpl.apps.selfpen.cases            # rewrite cases.json
     python -m volsmpl.apps.selfpen.cases --check    # verify cases.json is what the recipes give
     cases = load_cases()                            # list of Case
+
+A case file (this one or a user's, e.g. examples/selfpen/my_bodies.json) holds body parameters only: no
+translation, units or up axis. Its bodies are volsmpl's default body in volsmpl's frame (metres, Y up).
 """
 from __future__ import annotations
 

@@ -6,27 +6,33 @@
     volsmpl selfpen tune --model volsmpl,coap --out docs/selfpen                 # the tuning sweep (tune.py)
 
 Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<kind>, the paper's Table 6, per-case
-records per kind, figures, meta) and OUT/render_<case>.png (before / after per kind, intersecting triangles in red)
-for the first --render cases; prints the summary beside the paper's table. Each finished repair is kept in
-OUT/cases/ with the key of what made it, so a stopped run continues with --resume.
+records per kind, figures, meta) and OUT/render_<case>.png (before / after per kind, front and side, colliding
+triangles in red; figures.py) for the first --render cases; prints the summary beside the paper's table. Each case
+record holds the case's body parameters (`start_params`) and the repaired body (`body`: parameters and joints,
+volsmpl's frame: metres, Y up; bodies.py). Mesh files OUT/meshes/<case>/<kind>_before.ply and <kind>_after.ply
+(paths in the record's `meshes`) are written for a user's own --case-file always, for the shipped cases with
+--save-meshes. Each finished repair is kept in OUT/cases/ with the key of what made it, so a stopped run continues
+with --resume (its bodies, meshes and figures are made again from the kept record's pose). A bar over the cases and
+the optimiser's per-step bar show on a terminal (not with --quiet).
 """
 from __future__ import annotations
 
 from dataclasses import asdict
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from volsmpl.apps.checks import applies, claim_out, number, safe_name
+from volsmpl.apps.progress import progress, steps_bar
 from volsmpl.apps.table import (add_common, check_common, checkpoint_names, CaseRecords, envelope, flag_cases,
                                 print_flagged, volumes, write_results)
 
+from .bodies import take_away, writes_meshes
 from .cases import CASES_FILE, load_cases
+from .figures import render_case
 from .optimize import (GOOD, PAPER, PRESETS, RepairResult, SelfPenConfig, format_table, repair_case,
                        summarize)
 
-HIGHLIGHT, GREY = (0.9, 0.1, 0.1), (0.75, 0.75, 0.75)
 ACTIONS = ("run", "tune")
 
 
@@ -88,29 +94,10 @@ def _case_names(text: str) -> list[str] | None:
     return names
 
 
-def render_case(path, faces: np.ndarray, results: dict, size: int = 320) -> None:
-    """Before / after (per model: RepairResult kept with keep_meshes) views, front and side,
-    intersecting triangles highlighted; the label gives the number of intersecting pairs."""
-    from volsmpl.viz.render import grid, render_mesh, save_png
-
-    first = next(iter(results.values()))
-    panels = [("before", first.vertices_before, first.pairs_before)]
-    panels += [(f"after {m}", r.vertices_after, r.pairs_after) for m, r in results.items()]
-    extent = max(float(np.ptp(v[:, :2], axis=0).max()) for _, v, _ in panels) * 1.05
-    images, labels = [], []
-    for yaw in (0.0, 90.0):
-        for label, v, pairs in panels:
-            col = np.tile(np.array(GREY), (len(faces), 1))
-            col[np.unique(pairs.ravel())] = HIGHLIGHT
-            images.append(render_mesh(v, faces, col, size=size, yaw=yaw, extent=extent))
-            labels.append(f"{label} ({len(pairs)})")
-    save_png(path, grid(images, labels, cols=len(panels)))
-
-
 #: the options each action reads (volsmpl.apps.checks.applies refuses the others)
 _COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device", "cases", "case_file"}
-USES = {"run": _COMMON | {"resume", "render", "random_init", "preset", "lr", "max_iters", "w_selfpen", "w_prior",
-                          "n_points", "stop_checks", "tau", "patience", "stall_rtol", "max_step", "code_grad",
+USES = {"run": _COMMON | {"resume", "render", "save_meshes", "random_init", "preset", "lr", "max_iters", "w_selfpen",
+                          "w_prior", "n_points", "stop_checks", "tau", "patience", "stall_rtol", "max_step", "code_grad",
                           "sampler_seed"},
         "tune": _COMMON | {"max_iters", "stop_checks", "tau", "patience", "grid_lr", "grid_w_selfpen", "grid_w_prior",
                            "combine"}}
@@ -178,22 +165,27 @@ def _repair(args, cfg, body, vols: dict, cases: list, models: list, ckpts: dict)
     store = CaseRecords(args.out, "selfpen", resume=args.resume)
     per_model = {m: [] for m in models}
     figures = {}
-    for case in cases:
+    mesh_out = args.out if writes_meshes(args.case_file, args.save_meshes) else None
+    bar = steps_bar(args.quiet)
+    steps = {} if bar is None else {"progress": bar}  # None is repair_case's own default: a bar on a terminal
+    for i, case in enumerate(progress(cases, f"selfpen {','.join(models)}", quiet=args.quiet)):
         results = {}
+        draw = i < args.render
         for m in models:
-            draw = len(figures) < args.render
             spec = {"config": asdict(cfg), "model": m, "random_init": bool(args.random_init),
                     "case": {"name": case.name, "betas": case.betas, "global_orient": case.global_orient,
                              "body_pose": case.body_pose}}
             kept = {}
 
             def make():
-                r = repair_case(body, vols[m], case, cfg, keep_meshes=draw)
+                r = repair_case(body, vols[m], case, cfg, keep_meshes=draw, **steps)
                 kept["result"] = r
                 return r.to_json()
 
             rec, reused = store.get_or_make(f"{safe_name(case.name)}_{m}", spec, vols[m], make)
             r = kept.get("result") or RepairResult(**rec)
+            made = take_away(body, case, r.body_pose, m, mesh_out)  # from the record's pose, reused or not
+            r.start_params, r.body, r.meshes = made["start_params"], made["body"], made["meshes"]
             per_model[m].append(r)
             results[m] = r
             tail = "  (reused)" if reused else ""
@@ -203,8 +195,8 @@ def _repair(args, cfg, body, vols: dict, cases: list, models: list, ckpts: dict)
                 print(f"{case.name:28s} {m:8s} {r.status:16s} it {r.iterations:3d}  collisions {r.collisions_before:5d} -> "
                       f"{r.collisions_after:5d} (collidable parts {r.collidable_before} -> {r.collidable_after})  "
                       f"pose change {r.pose_change_deg:6.2f} deg  {r.total_s:6.2f} s{tail}")
-        if len(figures) < args.render and all(r.vertices_before is not None for r in results.values()):
-            render_case(Path(args.out) / f"render_{safe_name(case.name)}.png", body.faces, results)
+        if draw:
+            render_case(Path(args.out) / f"render_{safe_name(case.name)}.png", body, case, results)
             figures[case.name] = f"render_{safe_name(case.name)}.png"
         path, flagged = _write(args.out, config, per_model, figures, cfg.device)  # a stopped run keeps its cases
     summaries = {m: summarize(rs) for m, rs in per_model.items()}
@@ -217,7 +209,9 @@ def _repair(args, cfg, body, vols: dict, cases: list, models: list, ckpts: dict)
     note = store.note()
     if note:
         print(note)
-    print(f"wrote {path}" + (f" and {len(figures)} figure(s)" if figures else ""))
+    n_meshes = sum(len(r.meshes) for rs in per_model.values() for r in rs)
+    print(f"wrote {path}" + (f", {len(figures)} figure(s)" if figures else "")
+          + (f" and {n_meshes} mesh file(s) under {Path(args.out) / 'meshes'}" if n_meshes else ""))
     return 0
 
 

@@ -136,6 +136,11 @@ class RepairResult:
     points: list = field(default_factory=list)  # penetration samples per evaluation
     body_pose: list = field(default_factory=list)  # final (69,)
     status_why: str = ""  # the reason of a status in FLAGGED
+    # what a user takes away, filled by `volsmpl selfpen` from the record's pose (bodies.take_away): the case's body
+    # parameters, the repaired body (volsmpl.apps.outputs.body_record) and the mesh files written, relative to OUT
+    start_params: dict = field(default_factory=dict)
+    body: dict = field(default_factory=dict)
+    meshes: dict = field(default_factory=dict)
     pairs_before: np.ndarray | None = field(default=None, repr=False)
     pairs_after: np.ndarray | None = field(default=None, repr=False)
     vertices_before: np.ndarray | None = field(default=None, repr=False)
@@ -168,13 +173,16 @@ def check_case(case: Case) -> None:
             raise ValueError(f"case {case.name!r}: '{key}' contains NaN or Inf")
 
 
-def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), keep_meshes: bool = False) -> RepairResult:
+def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), keep_meshes: bool = False,
+                progress: bool | None = None) -> RepairResult:
     """Optimise one case's body pose against `volume`'s self-penetration loss (module docstring).
 
     Args:
         body: the body model (volsmpl.Body) the volume is attached to; volume: its Volume
         (VolumetricSMPL or COAP); case: the body to repair; cfg: hyper-parameters;
-        keep_meshes: keep vertices and intersecting pairs before/after (for rendering).
+        keep_meshes: keep vertices and intersecting pairs before/after (for rendering);
+        progress: the optimisation harness's per-step bar (None: on a terminal, for a cap of 50 steps or more;
+            False: never).
     Returns: RepairResult (a case without triangle collisions is returned unchanged, 0 iterations).
     """
     check_case(case)
@@ -187,7 +195,7 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
     res.body_pose = case.body_pose.tolist()
     final_pose = case.body_pose
     if res.collisions_before > 0:
-        final_pose = _optimise(body, volume, case, cfg, dev, res)
+        final_pose = _optimise(body, volume, case, cfg, dev, res, progress)
     after = before if final_pose is case.body_pose else body_collisions(body, case.betas, case.global_orient, final_pose)
     res.collisions_after, res.raw_after = len(after["pairs"]), len(after["raw"])
     fl, cm = volume.partition.face_labels.cpu().numpy(), volume.partition.collision_mask.cpu().numpy()
@@ -210,7 +218,8 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
     return res
 
 
-def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, res: RepairResult) -> torch.Tensor:
+def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, res: RepairResult,
+              progress: bool | None = None) -> torch.Tensor:
     """The SGD loop on the harness; fills res (status, iterations, timings, memory, losses) and returns the final
     (69,) pose."""
     if body.v_template.device != dev or volume.device != dev:
@@ -238,7 +247,7 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
         {"selfpen": Term(selfpen, cfg.w_selfpen),
          "prior": Term(lambda s: ((s.body_pose - theta0) ** 2).sum(dim=1), cfg.w_prior)},
         prepare=lambda s: {"out": body(betas=betas, global_orient=orient, body_pose=s.body_pose)},
-        optimizer="sgd", lr=cfg.lr, stops=stops, frozen=[volume], device=dev, progress=False)
+        optimizer="sgd", lr=cfg.lr, stops=stops, frozen=[volume], device=dev, progress=progress)
     res.iterations = run.iterations[0]
     res.status = run.status[0]
     if res.status == "resolved" and res.iterations == 0:

@@ -25,6 +25,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
+from volsmpl.apps.progress import progress, steps_bar
 
 from .optimize import SelfPenConfig, repair_case, summarize
 
@@ -70,13 +71,16 @@ def _best_point(rows: list) -> dict:
     return dict(zip(("lr", "w_selfpen", "w_prior"), _point(best(rows))))
 
 
-def tune(body, volumes: dict, cases, configs, log=print) -> dict:
+def tune(body, volumes: dict, cases, configs, log=print, quiet: bool = False) -> dict:
+    """Every grid point (`configs`) on every case by every volume; quiet: no progress bars (they show on a
+    terminal only)."""
     rows = []
     for cfg in configs:
         row = {"lr": cfg.lr, "w_selfpen": cfg.w_selfpen, "w_prior": cfg.w_prior, "models": {}}
         for m, vol in volumes.items():
             t0 = time.perf_counter()
-            res = [repair_case(body, vol, c, cfg) for c in cases]
+            res = [repair_case(body, vol, c, cfg, progress=steps_bar(quiet))
+                   for c in progress(cases, f"tune {m} w_selfpen {cfg.w_selfpen:g}", quiet=quiet)]
             row["models"][m] = {**score(res), "seconds": time.perf_counter() - t0,
                                 "per_case": {r.name: [r.collisions_before, r.collisions_after, r.iterations] for r in res}}
             s = row["models"][m]
@@ -113,7 +117,8 @@ def run_tune(args, body, volumes: dict, cases, checkpoints: dict) -> int:
 
     given = {k: getattr(args, k) for k in ("stop_checks", "tau", "patience") if getattr(args, k) is not None}
     base = SelfPenConfig(max_iters=args.max_iters, **given)   # the rest: the tuned preset's
-    result = tune(body, volumes, cases, grid_configs(base, args.grid_lr, args.grid_w_selfpen, args.grid_w_prior))
+    result = tune(body, volumes, cases, grid_configs(base, args.grid_lr, args.grid_w_selfpen, args.grid_w_prior),
+                  quiet=args.quiet)
     result["checkpoints"] = {m: c for m, c in checkpoints.items() if c is not None}
     path = write_results(args.out, result, "tune.json")
     print("best:", result["best"], "->", path)
