@@ -324,6 +324,27 @@ MUTANTS = {
     "paired_interval_of_the_wrong_level": ("apps/motion/stats.py", "confidence_level=confidence,",
                                            "confidence_level=confidence / 2,",
                                            [T + "apps/motion/test_stats.py::test_interval_matches_normal_theory_on_a_large_sample"]),
+    # the apps' outputs: bodies, meshes and figures a user takes away
+    "selfpen_after_mesh_is_the_start": ("apps/selfpen/bodies.py", 'for what, output in (("before", before), ("after", after)):',
+                                        'for what, output in (("before", before), ("after", before)):',
+                                        [T + "apps/selfpen/test_outputs.py::test_a_users_case_gives_its_repaired_body_and_meshes_in_the_record"]),
+    "selfpen_meshes_always": ("apps/selfpen/bodies.py", "    return bool(save_meshes) or Path(case_file).resolve() != CASES_FILE.resolve()",
+                              "    return True", [T + "apps/selfpen/test_outputs.py::test_the_shipped_table_writes_meshes_only_with_save_meshes"]),
+    "selfpen_resumed_meshes_stale": ("apps/selfpen/cli.py", "            made = take_away(body, case, r.body_pose, m, mesh_out)",
+                                     "            made = take_away(body, case, r.body_pose, m, None if reused else mesh_out)",
+                                     [T + "apps/selfpen/test_outputs.py::test_a_resumed_run_makes_its_meshes_again_from_the_record"]),
+    "selfpen_figure_hides_collisions": ("apps/selfpen/figures.py", "    marked[np.asarray(pairs, np.int64).ravel()] = True", "    pass",
+                                        [T + "apps/selfpen/test_outputs.py::test_the_figure_shows_the_colliding_triangles_in_red"]),
+    "scan_cloud_keeps_farthest_point_per_voxel": ("core/scene/scan.py", "order = np.lexsort((off, cell[:, 2]", "order = np.lexsort((-off, cell[:, 2]",
+                                                  [T + "scene/test_scan.py::test_cloud_thinned_to_one_point_per_voxel_nearest_its_centre"]),
+    "scan_mesh_whole_faces_counted": ("core/scene/scan.py", "            big = crosses & (", "            big = False & (",
+                                      [T + "scene/test_scan.py::test_mesh_points_at_the_spacing_inside_the_box"]),
+    "floor_level_lowest_slab": ("core/scene/floor.py", "    centre = float(edges[int(counts.argmax())])",
+                                "    centre = float(edges[int(np.flatnonzero(counts).min())])",
+                                [T + "scene/test_scan.py::test_floor_level_ignores_strays_below_the_floor"]),
+    "outputs_up_axis_not_turned_back": ("core/scene/scan.py", "        return np.stack([points[:, 0], -points[:, 2], points[:, 1]], 1)",
+                                        "        return np.stack([points[:, 0], points[:, 2], points[:, 1]], 1)",
+                                        [T + "apps/test_outputs.py::test_from_y_up_inverts_to_y_up"]),
 }
 
 
