@@ -56,6 +56,12 @@ def add_parser(sub):
     p.add_argument("--max-iters", type=int, default=d.max_iters, help=f"iteration cap (paper {d.max_iters})")
     p.add_argument("--w-selfpen", type=float, default=None, help=f"self-penetration weight (tuned {d.w_selfpen:g}, paper 0.1)")
     p.add_argument("--w-prior", type=float, default=None, help=f"pose prior weight (tuned {d.w_prior:g}, paper 1e3)")
+    p.add_argument("--limits", default=None, choices=["on", "off"],
+                   help="keep every joint within its anatomical limits (volsmpl.body.poses.JOINT_LIMITS; a joint that "
+                        "starts outside may not move farther out) as a hard bound (tuned on, paper off)")
+    p.add_argument("--hold", default=None, choices=["on", "off"],
+                   help="hold the joints the contact does not turn at their start: the spine and legs when an arm meets "
+                        "the torso (volsmpl.body.limits.contact_joints; tuned on, paper off)")
     p.add_argument("--n-points", type=int, default=d.n_points, help=f"samples per box of a colliding pair (paper {d.n_points})")
     p.add_argument("--stop-checks", type=int, default=None,
                    help=f"stop when so many point draws in a row find no penetration (tuned {d.stop_checks}, paper 1)")
@@ -97,7 +103,7 @@ def _case_names(text: str) -> list[str] | None:
 #: the options each action reads (volsmpl.apps.checks.applies refuses the others)
 _COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device", "cases", "case_file"}
 USES = {"run": _COMMON | {"resume", "render", "save_meshes", "random_init", "preset", "lr", "max_iters", "w_selfpen",
-                          "w_prior", "n_points", "stop_checks", "tau", "patience", "stall_rtol", "max_step", "code_grad",
+                          "w_prior", "limits", "hold", "n_points", "stop_checks", "tau", "patience", "stall_rtol", "max_step", "code_grad",
                           "sampler_seed"},
         "tune": _COMMON | {"max_iters", "stop_checks", "tau", "patience", "grid_lr", "grid_w_selfpen", "grid_w_prior",
                            "combine"}}
@@ -122,8 +128,9 @@ def check_options(args) -> None:
 def _config(args) -> SelfPenConfig:
     given = {k: getattr(args, k) for k in ("lr", "w_selfpen", "w_prior", "stop_checks", "tau", "patience",
                                            "stall_rtol", "max_step") if getattr(args, k) is not None}
-    if args.code_grad is not None:
-        given["code_grad"] = args.code_grad == "on"
+    for k in ("code_grad", "limits", "hold"):
+        if getattr(args, k) is not None:
+            given[k] = getattr(args, k) == "on"
     return SelfPenConfig.preset(args.preset, max_iters=args.max_iters, n_points=args.n_points, seed=args.sampler_seed,
                                 device=args.device, **given)
 
@@ -204,7 +211,8 @@ def _repair(args, cfg, body, vols: dict, cases: list, models: list, ckpts: dict)
     print(format_table(summaries))
     print("collisions: pose-induced intersecting triangle pairs (rest-pose pairs of the same shape left out), "
           "mean over cases; collidable parts: those of them between two parts the self-penetration loss may push "
-          "apart (not the same part, not neighbours or ignored pairs); memory: " + ", ".join(sorted({s['memory_kind'] for s in summaries.values() if s['memory_kind']})))
+          "apart (not the same part, not neighbours or ignored pairs); max chg: the mean of each case's largest joint "
+          "change (deg); limits: joint angles moved beyond their anatomical limits; memory: " + ", ".join(sorted({s['memory_kind'] for s in summaries.values() if s['memory_kind']})))
     print_flagged(flagged)
     note = store.note()
     if note:

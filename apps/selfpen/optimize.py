@@ -5,6 +5,13 @@ For one body (betas, global_orient, body_pose theta_0) minimise over the body po
 
     L(theta) = w_selfpen * selfpen_loss(body(theta)) + w_prior * ||theta - theta_0||^2
 
+over the joints the contact turns (`hold`: volsmpl.body.limits.contact_joints of the part pairs whose triangles
+collide at the start: an arm against the torso turns the arm's collar, shoulder, elbow, wrist and hand; the spine and
+legs are held at their start), every joint kept within its anatomical limits after each step (`limits`: a hard bound,
+volsmpl.body.limits.clamp_to_limits of volsmpl.body.poses.JOINT_LIMITS, widened to hold a start that lies outside:
+a repair may not move a joint farther out than it began, nor must it pull it in). The paper's objective (preset
+'paper') turns every joint and has no limits: hold and limits off.
+
 with SGD, at most `max_iters` steps, stopping as soon as the self-penetration loss samples no
 point inside two colliding parts (the list of points returned by `selfpen_loss` is empty)
 in `stop_checks` independent draws in a row (the paper stops on the first empty draw: 1; a draw
@@ -25,12 +32,19 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import torch
-
-from volsmpl.report import paper
+from volsmpl.body.limits import (
+    clamp_to_limits,
+    contact_joints,
+    largest_change_deg,
+    limits_around,
+    violations,
+)
+from volsmpl.body.poses import BODY_JOINTS
 from volsmpl.optim import MaxIters, Patience, StopWhen, Term, Variable, optimize
+from volsmpl.report import paper
 
 from .cases import Case
-from .triangles import body_collisions, count_collidable
+from .triangles import body_collisions, count_collidable, part_pairs
 
 # Table 6 of the paper (RTX 3090, PROX cases, SMPL-X): per-step time (ms), per-step memory (GB),
 # iterations, total time (s), mesh triangle collisions after repair.
@@ -46,13 +60,13 @@ PAPER = paper.rows("selfpen")
 # pass through the part encoder (code_grad False, Volume.selfpen_loss), all for both models alike.
 #: the statuses of a repair that worked or left the body as it was, and of one that failed (RepairResult)
 GOOD = ("no_intersection", "resolved", "stalled", "max_iters")
-FLAGGED = ("diverged", "worse_than_start", "no_volume_points")
+FLAGGED = ("diverged", "worse_than_start", "no_volume_points", "outside_limits")
 
 PRESETS = {
     "paper": {"lr": 1e-5, "w_selfpen": 0.1, "w_prior": 1e3, "stop_checks": 1, "tau": 1.0, "patience": 0, "stall_rtol": 0.0,
-              "code_grad": True, "max_step": 0.0},
+              "code_grad": True, "max_step": 0.0, "limits": False, "hold": False},
     "tuned": {"lr": 1e-2, "w_selfpen": 3.0, "w_prior": 1.0, "stop_checks": 3, "tau": 0.01, "patience": 10,
-              "stall_rtol": 0.1, "code_grad": False, "max_step": 0.1},
+              "stall_rtol": 0.1, "code_grad": False, "max_step": 0.1, "limits": True, "hold": True},
 }
 
 
@@ -75,11 +89,13 @@ class SelfPenConfig:
     # radians: longest step of one joint's rotation per iteration (the gradient is scaled to it; 0: plain SGD)
     max_step: float = PRESETS["tuned"]["max_step"]
     code_grad: bool = PRESETS["tuned"]["code_grad"]  # back-propagate through the part codes (Volume.selfpen_loss)
+    limits: bool = PRESETS["tuned"]["limits"]  # every joint within its anatomical limits after each step
+    hold: bool = PRESETS["tuned"]["hold"]  # only the joints the contact turns move; the others are held
     seed: int = 0  # seeds the point sampler of every case
     device: str = "cpu"
 
     @classmethod
-    def preset(cls, name: str, **overrides) -> "SelfPenConfig":
+    def preset(cls, name: str, **overrides) -> SelfPenConfig:
         if name not in PRESETS:
             raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
         return cls(**{**PRESETS[name], **overrides})
@@ -132,6 +148,15 @@ class RepairResult:
     collidable_before: int = 0
     collidable_after: int = 0
     pose_change_deg: float = 0.0  # mean over the 23 body joints of the geodesic rotation change
+    max_change_deg: float = 0.0  # the largest joint's geodesic rotation change, and that joint
+    max_change_joint: str = ""
+    # the largest change of a joint that the contact does not need to turn (contact_joints: the spine and legs for
+    # an arm against the torso), and that joint
+    still_change_deg: float = 0.0
+    still_change_joint: str = ""
+    moved_joints: list = field(default_factory=list)  # the joints the contact turns (with `hold`, the only ones that move)
+    limits_start: list = field(default_factory=list)  # angles of the start beyond JOINT_LIMITS [joint, axis, deg, lo, hi]
+    limits_after: list = field(default_factory=list)  # angles the repair moved beyond the limits (or farther out)
     loss: list = field(default_factory=list)  # total loss per step
     points: list = field(default_factory=list)  # penetration samples per evaluation
     body_pose: list = field(default_factory=list)  # final (69,)
@@ -160,6 +185,15 @@ def pose_change_deg(pose0, pose1) -> float:
     a = Rotation.from_rotvec(np.asarray(pose0, np.float64).reshape(-1, 3))
     b = Rotation.from_rotvec(np.asarray(pose1, np.float64).reshape(-1, 3))
     return float(np.degrees((a.inv() * b).magnitude()).mean())
+
+
+def _joint_changes_deg(pose0, pose1) -> np.ndarray:
+    """(23,) geodesic rotation change (degrees) of each body joint between two (69,) poses."""
+    from scipy.spatial.transform import Rotation
+
+    a = Rotation.from_rotvec(np.asarray(pose0, np.float64).reshape(-1, 3))
+    b = Rotation.from_rotvec(np.asarray(pose1, np.float64).reshape(-1, 3))
+    return np.degrees((a.inv() * b).magnitude())
 
 
 def check_case(case: Case) -> None:
@@ -195,19 +229,38 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
     res.body_pose = case.body_pose.tolist()
     final_pose = case.body_pose
     if res.collisions_before > 0:
-        final_pose = _optimise(body, volume, case, cfg, dev, res, progress)
+        fl, cm = volume.partition.face_labels.cpu().numpy(), volume.partition.collision_mask.cpu().numpy()
+        moving = contact_joints(part_pairs(before["pairs"], fl, cm), volume.partition.table, body.parents.cpu().numpy())
+        final_pose = _optimise(body, volume, case, cfg, dev, res, progress, moving)
     after = before if final_pose is case.body_pose else body_collisions(body, case.betas, case.global_orient, final_pose)
     res.collisions_after, res.raw_after = len(after["pairs"]), len(after["raw"])
     fl, cm = volume.partition.face_labels.cpu().numpy(), volume.partition.collision_mask.cpu().numpy()
     res.collidable_before = count_collidable(before["pairs"], fl, cm)
     res.collidable_after = count_collidable(after["pairs"], fl, cm)
     res.pose_change_deg = pose_change_deg(case.body_pose, final_pose)
+    res.max_change_deg, res.max_change_joint = largest_change_deg(case.body_pose, final_pose)
+    moving = contact_joints(part_pairs(before["pairs"], fl, cm), volume.partition.table, body.parents.cpu().numpy())
+    res.moved_joints = [BODY_JOINTS[j] for j in np.flatnonzero(moving)]
+    still = ~moving
+    if still.any():
+        d = _joint_changes_deg(case.body_pose, final_pose)
+        j = int(np.flatnonzero(still)[d[still].argmax()])
+        res.still_change_deg, res.still_change_joint = float(d[j]), BODY_JOINTS[j]
+    lo, hi = limits_around(case.body_pose)
+    res.limits_start = [list(v) for v in violations(case.body_pose)]
+    res.limits_after = [list(v) for v in violations(final_pose, lo, hi)]
     res.body_pose = final_pose.tolist()
     if res.status == "diverged":
         res.status_why = "a step made the pose or the loss non-finite (kept: the pose before it); lower --lr"
     elif res.status == "no_volume_points":
         res.status_why = (f"{res.collisions_before} colliding triangle pairs, but the volume finds no penetration "
                           f"to push apart: left as it was")
+    elif res.limits_after:
+        j, a, deg, lo_d, hi_d = res.limits_after[0]
+        res.status_why = (f"{len(res.limits_after)} joint angle(s) beyond the anatomical limits, e.g. {j} {a} "
+                          f"{deg:.0f} deg (limit {lo_d:.0f}..{hi_d:.0f}): not repairable within the limits with "
+                          f"these settings (the optimiser stopped as {res.status!r})")
+        res.status = "outside_limits"
     elif res.collisions_after > res.collisions_before:
         res.status_why = (f"colliding triangle pairs {res.collisions_before} -> {res.collisions_after} (the "
                           f"optimiser stopped as {res.status!r})")
@@ -219,9 +272,9 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
 
 
 def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, res: RepairResult,
-              progress: bool | None = None) -> torch.Tensor:
+              progress: bool | None = None, moving=None) -> torch.Tensor:
     """The SGD loop on the harness; fills res (status, iterations, timings, memory, losses) and returns the final
-    (69,) pose."""
+    (69,) pose. moving: (23,) bool, the joints the contact turns (with cfg.hold the only ones optimised)."""
     if body.v_template.device != dev or volume.device != dev:
         raise ValueError(f"body and volume must be on {dev} (got body on {body.v_template.device}, volume on "
                          f"{volume.device}); move them with .to('{dev}') first")
@@ -242,11 +295,22 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
     stops = [StopWhen(lambda ev: ev.info["selfpen"]["points"] == 0, "resolved"), MaxIters(cfg.max_iters)]
     if cfg.patience:
         stops.append(Patience("selfpen", cfg.patience, cfg.stall_rtol))
+    free = np.ones(23, bool) if not cfg.hold or moving is None or not np.any(moving) else np.asarray(moving, bool)
+    idx = torch.as_tensor(np.flatnonzero(np.repeat(free, 3)), device=dev)
+    lo, hi = limits_around(case.body_pose)
+
+    def full(values):   # the whole (B, 69) pose: the free joints' values, the held ones at their start
+        return theta0.expand(values.shape[0], -1).index_copy(1, idx, values)
+
+    def project(values):
+        return clamp_to_limits(full(values), lo, hi).index_select(1, idx)
+
     run = optimize(
-        {"body_pose": Variable(theta0.clone(), max_step=cfg.max_step or None, group=3)},
+        {"body_pose": Variable(theta0[:, idx].clone(), max_step=cfg.max_step or None, group=3,
+                               project=project if cfg.limits else None)},
         {"selfpen": Term(selfpen, cfg.w_selfpen),
-         "prior": Term(lambda s: ((s.body_pose - theta0) ** 2).sum(dim=1), cfg.w_prior)},
-        prepare=lambda s: {"out": body(betas=betas, global_orient=orient, body_pose=s.body_pose)},
+         "prior": Term(lambda s: ((s.body_pose - theta0[:, idx]) ** 2).sum(dim=1), cfg.w_prior)},
+        prepare=lambda s: {"out": body(betas=betas, global_orient=orient, body_pose=full(s.body_pose))},
         optimizer="sgd", lr=cfg.lr, stops=stops, frozen=[volume], device=dev, progress=progress)
     res.iterations = run.iterations[0]
     res.status = run.status[0]
@@ -256,16 +320,19 @@ def _optimise(body, volume, case: Case, cfg: SelfPenConfig, dev: torch.device, r
     res.loss = [r.total[0] for r in run.records if r.updated]
     res.total_s = run.seconds
     res.peak_memory_bytes, res.memory_kind = int(run.peak_bytes), run.memory_kind
-    return run.variables["body_pose"][0].cpu()
+    return full(run.variables["body_pose"])[0].cpu()
 
 
 def summarize(results: list[RepairResult]) -> dict:
     """Table row of one model over its cases: means over the cases that had collisions (per-step
     time over all steps; memory: the largest peak). removed_per_s: triangle collisions removed per second
-    of repair, sum over those cases of (before - after) over the sum of their loop times."""
+    of repair, sum over those cases of (before - after) over the sum of their loop times. max_change_deg: the mean
+    over the cases of each case's largest joint change; largest_change_deg its largest; largest_still_change_deg: the
+    largest change of a joint the contact does not turn; limit_violations: joint angles the repairs moved beyond
+    their limits (all cases)."""
     active = [r for r in results if r.status != "no_intersection"]
     steps = [t for r in active for t in r.step_ms]
-    mean = lambda xs: float(np.mean(xs)) if len(xs) else float("nan")  # noqa: E731
+    mean = lambda xs: float(np.mean(xs)) if len(xs) else float("nan")
     return {
         "cases": len(results),
         "cases_with_collisions": len(active),
@@ -282,6 +349,10 @@ def summarize(results: list[RepairResult]) -> dict:
         "collidable_before": mean([r.collidable_before for r in active if r.collidable_before is not None]),
         "collidable_after": mean([r.collidable_after for r in active if r.collidable_after is not None]),
         "pose_change_deg": mean([r.pose_change_deg for r in active]),
+        "max_change_deg": mean([r.max_change_deg for r in active]),
+        "largest_change_deg": max([r.max_change_deg for r in active], default=0.0),
+        "largest_still_change_deg": max([r.still_change_deg for r in active], default=0.0),
+        "limit_violations": sum(len(r.limits_after) for r in active),
         "removed_per_s": (sum(r.collisions_before - r.collisions_after for r in active) / total
                           if (total := sum(r.total_s for r in active)) > 0 else float("nan")),
     }
@@ -290,13 +361,13 @@ def summarize(results: list[RepairResult]) -> dict:
 def format_table(summaries: dict) -> str:
     """Our rows (model -> summarize(...)) beside the paper's Table 6."""
     head = (f"{'':24s} {'step ms':>8s} {'mem GB':>8s} {'iters':>7s} {'total s':>8s} {'coll. before':>12s} {'coll. after':>11s} "
-            f"{'pose chg deg':>12s} {'collidable parts':>16s} {'removed/s':>9s}")
+            f"{'pose chg deg':>12s} {'max chg':>7s} {'limits':>6s} {'collidable parts':>16s} {'removed/s':>9s}")
     lines = [head, "-" * len(head)]
     names = {"volsmpl": "VolumetricSMPL", "coap": "COAP", "mesh": "exact mesh"}
     for m, s in summaries.items():
         lines.append(f"{'ours ' + names.get(m, m):24s} {s['step_ms']:8.1f} {s['memory_gb']:8.3f} {s['iterations']:7.2f} "
                      f"{s['total_s']:8.3f} {s['collisions_before']:12.1f} {s['collisions_after']:11.1f} {s['pose_change_deg']:12.3f} "
-                     f"{s['collidable_before']:7.1f} -> {s['collidable_after']:5.1f} {s['removed_per_s']:9.1f}")
+                     f"{s.get('max_change_deg', float('nan')):7.1f} {s.get('limit_violations', 0):6d} {s['collidable_before']:7.1f} -> {s['collidable_after']:5.1f} {s['removed_per_s']:9.1f}")
     for m in ("coap", "volsmpl"):
         p = PAPER[m]
         lines.append(f"{'paper ' + names[m]:24s} {p['step_ms']:8.1f} {p['memory_gb']:8.3f} {p['iterations']:7.2f} "

@@ -345,6 +345,17 @@ def body_collisions(body, betas, global_orient, body_pose, tol: float = DEFAULT_
     return {"pairs": pairs, "raw": raw, "rest": rest_pairs, "vertices": v}
 
 
+def part_pairs(pairs: np.ndarray, face_labels, collision_mask) -> list:
+    """The distinct (part a, part b) pairs, a < b, of the triangle pairs (P, 2) whose faces lie on two different
+    parts allowed to collide."""
+    if len(pairs) == 0:
+        return []
+    lab = np.sort(np.asarray(face_labels)[np.asarray(pairs)], axis=1)
+    mask = np.asarray(collision_mask, dtype=bool)
+    keep = mask[lab[:, 0], lab[:, 1]] & (lab[:, 0] != lab[:, 1])
+    return [tuple(int(x) for x in p) for p in np.unique(lab[keep], axis=0)]
+
+
 def count_collidable(pairs: np.ndarray, face_labels, collision_mask) -> int:
     """Number of triangle pairs (P, 2) whose faces lie on two different parts allowed to collide."""
     if len(pairs) == 0:

@@ -42,13 +42,15 @@ class Variable:
 
     lr: its own learning rate (default: optimize's lr). max_step: the longest update of one group of `group`
     consecutive values per iteration (e.g. 0.1 rad per axis-angle joint with group=3); a longer update is
-    scaled down as a whole (its direction kept: a trust region). None: no limit.
+    scaled down as a whole (its direction kept: a trust region). None: no limit. project: values (B, ...) -> values
+    inside a feasible set, applied without gradient after every update (a hard bound, e.g. joint limits).
     """
 
     value: torch.Tensor
     lr: float | None = None
     max_step: float | None = None
     group: int = 1
+    project: Callable | None = None
 
 
 @dataclass
@@ -286,11 +288,11 @@ def _diverge(params: dict, before: dict | None, rows: torch.Tensor, status: list
 
 @torch.no_grad()
 def _limit_and_keep(params: dict, old: dict, vars_: dict, active: torch.Tensor) -> None:
-    """Scale each problem's update of a variable with max_step so no group moves farther than max_step, and
-    put back the values of problems that stopped."""
+    """Scale each problem's update of a variable with max_step so no group moves farther than max_step, project
+    it into its feasible set (Variable.project), and put back the values of problems that stopped."""
     for n, p in params.items():
         v = vars_[n]
-        if v.max_step is None and bool(active.all()):
+        if v.max_step is None and bool(active.all()) and v.project is None:
             continue
         delta = p - old[n]
         if v.max_step is not None:
@@ -299,3 +301,6 @@ def _limit_and_keep(params: dict, old: dict, vars_: dict, active: torch.Tensor) 
             delta = delta * factor.reshape(-1, *[1] * (delta.ndim - 1))
         keep = active.reshape(-1, *[1] * (delta.ndim - 1)).to(delta.dtype)
         p.copy_(old[n] + delta * keep)
+        if v.project is not None:
+            moved = v.project(p.detach().clone())
+            p.copy_(torch.where(active.reshape(-1, *[1] * (p.ndim - 1)), moved, p))

@@ -157,3 +157,24 @@ def test_a_problem_that_diverges_stops_and_keeps_its_last_finite_values():
                    lr=0.25, max_iters=3, progress=False)
     assert res.status == ["max_iters", "diverged"] and res.iterations == [3, 0]
     assert res.variables["x"][1, 0] == pytest.approx(1e20) and res.variables["x"][0, 0] == pytest.approx(0.125)
+
+
+def test_project_is_a_hard_bound_after_every_update():
+    """min (x - 2)^2 with x projected into [0, 1] after each step ends at x = 1 (the bound), never beyond it, while
+    the unprojected problem in the same batch goes on to 2."""
+    seen = []
+
+    def clamp(v):
+        out = v.clone()
+        out[0] = out[0].clamp(0.0, 1.0)
+        return out
+
+    def term(s):
+        seen.append(float(s.x[0, 0]))
+        return ((s.x - 2.0) ** 2).sum(1)
+
+    res = optimize({"x": Variable(torch.zeros(2, 1), project=clamp)}, {"f": term}, optimizer="sgd", lr=0.1,
+                   max_iters=200)
+    assert res.variables["x"][0, 0].item() == pytest.approx(1.0)
+    assert res.variables["x"][1, 0].item() == pytest.approx(2.0, abs=1e-4)
+    assert max(seen) <= 1.0

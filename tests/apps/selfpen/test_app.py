@@ -227,7 +227,7 @@ class _StubVolume(torch.nn.Module):
 def test_repair_loop_stops_when_no_points_remain(body):
     case = C.load_cases(names=["hands_through_thighs"])[0]
     vol = _StubVolume(k=3)
-    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_selfpen=0.1, w_prior=1.0, stop_checks=1))
+    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_selfpen=0.1, w_prior=1.0, stop_checks=1, hold=False, limits=False))
     assert r.status == "resolved" and r.iterations == 3 and r.points == [5, 5, 5, 0]
     assert len(r.step_ms) == 3 and r.total_s > 0 and r.pose_change_deg > 0
     assert vol.w.requires_grad and vol.w.grad is None  # only the pose was optimised
@@ -277,11 +277,11 @@ def test_repair_stops_when_the_penetration_term_stalls(body):
 def test_repair_stop_checks_redraw_before_stopping(body):
     case = C.load_cases(names=["hands_through_thighs"])[0]
     # one empty draw stops the paper's loop at once ...
-    r = repair_case(body, _StubVolume(pattern=[5, 0, 7]), case, SelfPenConfig(lr=0.5, w_selfpen=0.1, w_prior=1.0, stop_checks=1))
+    r = repair_case(body, _StubVolume(pattern=[5, 0, 7]), case, SelfPenConfig(lr=0.5, w_selfpen=0.1, w_prior=1.0, stop_checks=1, hold=False, limits=False))
     assert r.status == "resolved" and r.iterations == 1 and r.points == [5, 0]
     # ... with stop_checks=2 the second draw finds points again and the next step uses it; two empty draws stop
     vol = _StubVolume(pattern=[5, 0, 7, 0, 0])
-    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_selfpen=0.1, w_prior=1.0, stop_checks=2))
+    r = repair_case(body, vol, case, SelfPenConfig(lr=0.5, w_selfpen=0.1, w_prior=1.0, stop_checks=2, hold=False, limits=False))
     assert r.status == "resolved" and r.iterations == 2 and r.points == [5, 0, 7, 0, 0] and vol.calls == 5
     assert len(r.step_ms) == 2
     # all draws empty at the start: nothing to repair for the volume
