@@ -345,6 +345,21 @@ MUTANTS = {
     "outputs_up_axis_not_turned_back": ("core/scene/scan.py", "        return np.stack([points[:, 0], -points[:, 2], points[:, 1]], 1)",
                                         "        return np.stack([points[:, 0], points[:, 2], points[:, 1]], 1)",
                                         [T + "apps/test_outputs.py::test_from_y_up_inverts_to_y_up"]),
+    # self-intersection repairs within the anatomy
+    "limits_no_wrap": ("core/body/limits.py", "    return mid + torch.remainder(e - mid + np.pi, 2 * np.pi) - np.pi", "    return e",
+                       [T + "body/test_limits.py::test_an_angle_past_half_a_turn_is_the_same_turn"]),
+    "limits_clamp_moves_every_joint": ("core/body/limits.py", "    return torch.where(out_of[..., None], aa, pose).reshape(B, 69)",
+                                       "    return aa.reshape(B, 69)",
+                                       [T + "body/test_limits.py::test_clamp_turns_only_the_joints_beyond_their_limits_to_the_clamped_angles"]),
+    "contact_joints_include_the_trunk": ("core/body/limits.py", "        for j in (limbs or joints):", "        for j in joints:",
+                                         [T + "body/test_limits.py::test_contact_joints_of_an_arm_against_the_chest_and_a_hand_against_a_thigh"]),
+    "harness_project_ignored": ("core/optim/harness.py", "            p.copy_(torch.where(active.reshape(-1, *[1] * (p.ndim - 1)), moved, p))",
+                                "            pass", [T + "optim/test_optim.py::test_project_is_a_hard_bound_after_every_update"]),
+    "selfpen_holds_nothing": ("apps/selfpen/optimize.py", "    idx = torch.as_tensor(np.flatnonzero(np.repeat(free, 3)), device=dev)",
+                              "    idx = torch.arange(69, device=dev)",
+                              [T + "apps/selfpen/test_limits.py::test_an_arm_cross_is_repaired_by_the_arms_alone_within_the_limits"]),
+    "selfpen_beyond_limits_not_flagged": ("apps/selfpen/optimize.py", "    elif res.limits_after:", "    elif False:",
+                                          [T + "apps/selfpen/test_limits.py::test_without_the_bounds_the_spine_folds_and_the_repair_is_flagged"]),
 }
 
 
