@@ -5,13 +5,20 @@ Table 4, supp. D.2).
     volsmpl egohmr train --out runs/egohmr [--steps 4000] [--resume]
     volsmpl egohmr tune --split val --out docs/egohmr                # guidance scale per guide, on val: tune.json
     volsmpl egohmr sample --model none,volsmpl,coap,mesh --split test [--frames N] --out out/egohmr
-    volsmpl egohmr sample --frame my_frame.json --scene scan.ply [--units mm] [--up z] --out out/mine   # user_run.py
+    volsmpl egohmr sample --frame my_frame.json --scene scan.ply [--units mm] [--up z] [--spacing M] --out out/mine
+                                                              # a user's frame: user_run.py (example: examples/egohmr/)
 
 Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<guide>, the paper's Table 4, per-frame
 records per guide, figures, meta; then the regressor's row and the measured largest batch per guide) and
 OUT/frame_<name>.png for the first --render frames. Each per-frame record holds its `status` (ok, diverged,
 past_joint_limits, penetrating, far_from_keypoints: status.py) and `status_why`; results.json's `flagged` lists the
-others and `warnings` what a user's frame or scene made the run warn about.
+others and `warnings` what a user's frame or scene made the run warn about. Each record holds the recovered `body`
+(bodies.py; on a split: compact, camera frame) and its `mesh` file under OUT/meshes/ (a user's frame: always, in
+the scene file's units and axes; a split: with --save-meshes). A bar per batch and per denoising step shows on a
+terminal (--quiet: none).
+
+A user's scene may be a scan of any size: only its part in the 2 m cube around the estimated pelvis is sampled, at
+one point per --spacing metres (user_scene.py).
 
 Every option is checked against the mode before any work (options.check_options): an option the mode does not read
 is refused, e.g. --split with `sample --frame`, --steps outside train, --factors outside tune; a user's frame and
@@ -32,7 +39,9 @@ ACTIONS = ("sample", "make-data", "train", "tune")
 
 
 def add_parser(sub):
+    from .evaluate import GUIDE_POINTS
     from .train import TrainSettings
+    from .user_scene import DEFAULT_SPACING, MAX_SPACING, MIN_SPACING
 
     d = TrainSettings()
     p = sub.add_parser("egohmr", help="egocentric body recovery with collision-guided diffusion (Table 4)",
@@ -77,6 +86,11 @@ def add_parser(sub):
     p.add_argument("--up", default="y", choices=["y", "z"],
                    help="with --frame: --scene's up axis: a z-up scan is turned Y-up before the frame's "
                         "world_to_camera applies")
+    p.add_argument("--spacing", type=float, default=None, metavar="M",
+                   help="with --frame: metres between the scene points taken in the 2 m cube around the body (a "
+                        "mesh's faces sampled by area, a cloud thinned), so a scan of any size works as one cropped "
+                        f"to the room; default {DEFAULT_SPACING:.4f} (a floor across the cube gives the guidance's "
+                        f"{GUIDE_POINTS:,} points); {MIN_SPACING:g} to {MAX_SPACING:.3f}")
     p.add_argument("--steps", type=int, default=d.steps, help="train: optimisation steps")
     return p
 

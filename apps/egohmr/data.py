@@ -40,6 +40,7 @@ from scipy.spatial.transform import Rotation
 
 from volsmpl.scene import ROOM_COUNT, cached, intrinsics_from_fov, look_at, subsample
 
+from .evaluate import MIN_SCENE_POINTS
 from .placement import ACTIVITIES, affords, default_body, place
 from .room_checks import crop, load_room, room_cloud
 
@@ -64,7 +65,6 @@ MIN_EYE_BODY = 0.5  # metres from the eye to the nearest body vertex
 KP_SIGMA_PX, KP_BORDER_PX, KP_BORDER_GAIN, KP_CLIP_SD = 2.0, 40.0, 2.0, 3.0
 OUTLIER_P, OUTLIER_PX = 0.04, (15.0, 60.0)
 KP_MAX_ERROR_PX = 60.0
-MIN_SCENE_POINTS = 500
 
 
 @dataclass

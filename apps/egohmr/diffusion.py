@@ -85,7 +85,7 @@ class Guidance:
 
 def sample(denoise: Callable, shape: tuple, schedule: Schedule, generator: torch.Generator | None = None,
            guide: Guidance | None = None, device=None, dtype=torch.float32, x_T: torch.Tensor | None = None,
-           noises: torch.Tensor | None = None) -> torch.Tensor:
+           noises: torch.Tensor | None = None, bar: Callable | None = None) -> torch.Tensor:
     """Ancestral DDPM sampling from x_T ~ N(0, I) down to x_0.
 
     Args:
@@ -94,6 +94,7 @@ def sample(denoise: Callable, shape: tuple, schedule: Schedule, generator: torch
         generator: the noise's generator (the same generator state gives the same samples for every guide).
         guide: collision guidance, or None.
         x_T, noises: optional fixed start (B, D) and per-step noises (T, B, D) (tests).
+        bar: wraps the steps' iterable (e.g. a progress bar: volsmpl.apps.progress.progress); None: plain.
     Returns:
         x_0 (B, D).
     """
@@ -102,7 +103,8 @@ def sample(denoise: Callable, shape: tuple, schedule: Schedule, generator: torch
     x = torch.randn(shape, generator=generator, dtype=dtype).to(device) if x_T is None else x_T
     if noises is None:
         noises = torch.randn((T, *shape), generator=generator, dtype=dtype).to(x.device)
-    for t in range(T - 1, -1, -1):
+    steps = range(T - 1, -1, -1)
+    for t in (steps if bar is None else bar(steps)):
         tt = torch.full((shape[0],), t, dtype=torch.long, device=x.device)
         with torch.no_grad():
             x0_hat = denoise(x, tt)

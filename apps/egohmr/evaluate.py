@@ -22,6 +22,7 @@ from .pose import POSE_DIM, pose_body_finite, pose_joints
 
 GUIDE_POINTS = 20000  # scene points of the collision score (supp. D.2: 20k in a 2 x 2 m cube)
 GUIDE_CUBE = 2.0
+MIN_SCENE_POINTS = 500  # fewer distinct scene points in the cube are refused (data.scene_points, a user's scene)
 
 
 @dataclass
@@ -59,9 +60,13 @@ def _rows(d: dict, idx) -> dict:
     return {k: v[idx] for k, v in d.items()}
 
 
-def draw(net, body, d: dict, volume=None, opts: GuideOptions | None = None, seed: int = 0):
+def draw(net, body, d: dict, volume=None, opts: GuideOptions | None = None, seed: int = 0, quiet: bool = True,
+         desc: str = "denoising"):
     """One sample per frame of a prepared batch, guided by `volume` (None: unguided). Returns (poses (B, 144),
-    the CollisionScore or None)."""
+    the CollisionScore or None). quiet=False: a bar `desc` over the denoising steps on a terminal
+    (volsmpl.apps.progress)."""
+    from volsmpl.apps.progress import progress
+
     sched = Schedule(net.config.steps)
     cond = net.condition(d["c_kp"], d["scene_cond"], d["pelvis_hat"])
     gen = torch.Generator().manual_seed(seed)
@@ -70,26 +75,34 @@ def draw(net, body, d: dict, volume=None, opts: GuideOptions | None = None, seed
         score = CollisionScore(body, volume, d["betas_hat"], d["pelvis_hat"], d["guide_points"], opts.wrt,
                                opts.joints, opts.reduce)
         guide = Guidance(score.gradient, opts.scale, opts.steps, opts.plain_steps, opts.plain_factor)
-    x = sample(lambda xt, t: net.denoise(xt, t, cond), (len(cond), POSE_DIM), sched, gen, guide, device=cond.device)
+    bar = lambda steps: progress(steps, desc, quiet=quiet, total=sched.T, unit="step")  # noqa: E731
+    x = sample(lambda xt, t: net.denoise(xt, t, cond), (len(cond), POSE_DIM), sched, gen, guide, device=cond.device,
+               bar=bar)
     return x, score
 
 
 def sample_frames(net, body, frames, prep: dict, volume=None, opts: GuideOptions | None = None, batch: int = 16,
-                  seed: int = 0, scenes=None, poses: torch.Tensor | None = None) -> list[dict]:
+                  seed: int = 0, scenes=None, poses: torch.Tensor | None = None, quiet: bool = True,
+                  desc: str = "egohmr") -> list[dict]:
     """Per-frame records of one guide over frames (prep: `prepare` of the same frames): errors (mm), collision
     ratio, contact, sampling seconds per frame, and the frame's status judged without ground truth (status.py:
     `status`, `status_why` and the measures it reads). scenes: the frames' scene meshes (camera frame) for contact.
-    poses: score these pose vectors (B, 144) instead of sampling (e.g. the regressor's, prep['pose_reg'])."""
+    poses: score these pose vectors (B, 144) instead of sampling (e.g. the regressor's, prep['pose_reg']).
+    quiet=False: a bar `desc` over the batches and one over each batch's denoising steps, on a terminal."""
+    from volsmpl.apps.progress import progress
+
     from .data import scene_mesh
     from .status import judge, measure
 
     recs = []
     faces = torch.as_tensor(body.faces, device=prep["kp"].device)
-    for s in range(0, len(frames), batch):
+    starts = range(0, len(frames), batch)
+    for s in progress(starts, desc, quiet=quiet, total=len(starts), unit="batch"):
         idx = torch.arange(s, min(s + batch, len(frames)), device=prep["kp"].device)
         d = _rows(prep, idx)
         t0 = time.perf_counter()
-        x = draw(net, body, d, volume, opts, seed=seed + s)[0] if poses is None else poses[idx]
+        x = (draw(net, body, d, volume, opts, seed=seed + s, quiet=quiet, desc=f"{desc}: denoising")[0]
+             if poses is None else poses[idx])
         secs = (time.perf_counter() - t0) / len(idx)
         with torch.no_grad():
             out = pose_body_finite(body, d["betas_hat"], x, d["pelvis_hat"])
@@ -193,4 +206,4 @@ def max_batch(net, body, frame_prep: dict, volume, opts: GuideOptions, budget_mb
 
 
 __all__ = ["GuideOptions", "prepare", "draw", "sample_frames", "summarize", "regressor_and_sample_errors",
-           "max_batch", "GUIDE_POINTS"]
+           "max_batch", "GUIDE_POINTS", "GUIDE_CUBE", "MIN_SCENE_POINTS"]

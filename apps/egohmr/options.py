@@ -20,8 +20,10 @@ MODELS = {"model", "checkpoint_volsmpl", "checkpoint_coap", "checkpoint", "threa
 #: mode -> the options (argparse dests) it reads; any other given with a non-default value is refused
 USES = {
     "egohmr sample": MODELS | GUIDANCE | {"scale", "tuned", "split", "frames", "batch", "budget_mb", "no_max_batch",
-                                          "resume", "render"},
-    "egohmr sample --frame": MODELS | GUIDANCE | {"scale", "tuned", "frame", "scene", "units", "up", "render"},
+                                          "resume", "render", "save_meshes"},
+    # a user's frame writes its meshes always: --save-meshes is accepted and changes nothing
+    "egohmr sample --frame": MODELS | GUIDANCE | {"scale", "tuned", "frame", "scene", "units", "up", "spacing",
+                                                  "render", "save_meshes"},
     "egohmr tune": MODELS | GUIDANCE | {"split", "frames", "batch", "factors"},
     "egohmr train": {"out", "steps", "seed", "threads", "resume", "device"},
     "egohmr make-data": {"seed", "threads"},
@@ -123,7 +125,7 @@ def check_options(args, mode: str) -> None:
         raise ValueError(f"--encoder-bf16 sets the guides' encoder arithmetic: it applies to sample and tune, not "
                          f"{args.action}; drop it")
     if mode == "egohmr sample":
-        stray = _given(args, ("scene", "units", "up")) or (["--scene"] if args.scene else [])
+        stray = _given(args, ("scene", "units", "up", "spacing")) or (["--scene"] if args.scene else [])
         if stray:
             one = len(stray) < 2
             raise ValueError(f"{', '.join(stray)} describe{'s' if one else ''} the scene of a user's frame: add "
@@ -162,6 +164,12 @@ def check_options(args, mode: str) -> None:
         number(args.steps, "--steps", lo=1, what="optimisation steps")
     if "render" in uses:
         number(args.render, "--render", lo=0, what="figures of the first N frames; 0: none")
+    if "spacing" in uses and getattr(args, "spacing", None) is not None:
+        from .user_scene import MAX_SPACING, MIN_SPACING
+
+        number(args.spacing, "--spacing", lo=MIN_SPACING, hi=MAX_SPACING,
+               what="metres between scene points: coarser, a floor across the 2 m cube around the body gives fewer "
+                    "points than the guidance needs; finer adds nothing it reads")
     if "guide_steps" in uses:
         number(args.guide_steps, "--guide-steps", lo=1, what="the last diffusion steps that are guided")
         number(args.plain_steps, "--plain-steps", lo=0, hi=args.guide_steps,

@@ -3,7 +3,11 @@ user_run.py.
 
 sample: every guide samples the same frames from the same noise; each is scored by the same exact tests and each
 frame judged without ground truth (status.py; results.json's `flagged` lists the frames not 'ok');
-results.json is rewritten after every guide (a long run stopped early keeps its finished guides).
+results.json is rewritten after every guide (a long run stopped early keeps its finished guides). Each frame's
+record holds the recovered body, compact and in the camera frame (bodies.compact_bodies), made from the record's
+pose (so a record reused by --resume gives its body too); --save-meshes writes each as
+OUT/meshes/<frame>/<guide>_body.ply, and a run first removes the body meshes an earlier run left in OUT.
+A bar per batch and per denoising step shows on a terminal (--quiet: none).
 tune: each learned guide's scale swept over TUNE_FACTORS x the paper's on the val split; the best is the lowest
 collision ratio among the scales whose MPJPE stays within TUNE_MPJPE_SLACK_MM of the unguided sampler's. tune.json
 is rewritten after every guide, its `best` holding the guides finished so far (`complete` false until the end).
@@ -69,6 +73,7 @@ def run_sample(args, ckpts: dict) -> int:
     from volsmpl.io.provenance import machine_info
     from volsmpl.report import paper
 
+    from .bodies import FRAME_TABLE, clear_meshes, compact_bodies, write_body_mesh
     from .evaluate import max_batch, sample_frames, summarize
     from .figures import frame_figure
     from .options import options_of, parse_guides, scales_of
@@ -84,18 +89,22 @@ def run_sample(args, ckpts: dict) -> int:
     store = CaseRecords(out, "egohmr", resume=args.resume)
     summary, records, options, batches = {}, {}, {}, {}
     # the no-diffusion baseline: the regressor's own pose, scored by the same tests (not a guide: no row in Table 4)
-    reg = summarize(sample_frames(net, body, frames, prep, batch=args.batch, scenes=scenes, poses=prep["pose_reg"]))
+    reg = summarize(sample_frames(net, body, frames, prep, batch=args.batch, scenes=scenes, poses=prep["pose_reg"],
+                                  quiet=args.quiet, desc="egohmr regressor"))
     reg.pop("s_per_frame")
     print(f"regressor (no diffusion): MPJPE {reg['mpjpe_mm']:.1f} mm (vis. {reg['mpjpe_visible_mm']:.1f}, invis. "
           f"{reg['mpjpe_invisible_mm']:.1f})  collision {reg['collision_ratio']:.4f}")
     config = run_config(args, guides, ckpts, scales, len(frames), args.split)
     config["checkpoint_meta"] = {k: meta.get(k) for k in ("step", "validation", "train_frames", "seconds")}
+    config["bodies"] = FRAME_TABLE
+    clear_meshes(out)
     for g in guides:
         opts = options_of(args, scales[g])
         vol = vols[g]
 
         def make():
-            recs = sample_frames(net, body, frames, prep, vol, opts, batch=args.batch, seed=args.seed, scenes=scenes)
+            recs = sample_frames(net, body, frames, prep, vol, opts, batch=args.batch, seed=args.seed, scenes=scenes,
+                                 quiet=args.quiet, desc=f"egohmr {g}")
             s = summarize(recs)
             s["sample_batch"] = args.batch
             mb = None
@@ -120,8 +129,12 @@ def run_sample(args, ckpts: dict) -> int:
               f"contact {s['contact_pct']:.0f} %  {s['s_per_frame']:.3f} s/frame"
               + (f"  max batch {s['max_batch']} in {args.budget_mb:g} MB" if "max_batch" in s else "")
               + ("  (reused)" if reused else ""))
-        for r, rec in zip(records[g], done["records"]):
-            r["_pose"] = rec["pose"]
+        poses = torch.tensor([rec["pose"] for rec in done["records"]], dtype=torch.float32, device=prep["kp"].device)
+        bodies, verts = compact_bodies(body, prep["betas_hat"], poses, prep["pelvis_hat"])
+        for r, rec, b, v, f in zip(records[g], done["records"], bodies, verts, frames):
+            r["_pose"], r["body"] = rec["pose"], b
+            if args.save_meshes and v is not None:
+                r["mesh"] = write_body_mesh(out, f.name, g, v, body.faces)
         extra = {"options": options, "regressor": reg, "max_batch": batches}
         if tuning is not None:
             extra["tuning"] = tuning
@@ -178,7 +191,8 @@ def run_tune(args, ckpts: dict) -> int:
         print("tune: tuning runs on the val split (the test split is for reporting only)")
     body, net, meta, frames, prep, scenes = _setup(args, split)
     vols = guide_volumes(args, guides, ckpts, body.v_template.device)
-    base = summarize(sample_frames(net, body, frames, prep, None, None, args.batch, args.seed, scenes))
+    base = summarize(sample_frames(net, body, frames, prep, None, None, args.batch, args.seed, scenes,
+                                   quiet=args.quiet, desc="egohmr tune none"))
     print(f"{len(frames)} {split} frames; unguided first")
     rows = [{"guide": "none", "scale": 0.0, **base}]
     print(f"none     MPJPE {base['mpjpe_mm']:.1f}  collision {base['collision_ratio']:.4f}")
@@ -197,7 +211,8 @@ def run_tune(args, ckpts: dict) -> int:
         cands = []
         for f in factors:
             a = PAPER_SCALE[g] * f
-            s = summarize(sample_frames(net, body, frames, prep, vol, options_of(args, a), args.batch, args.seed, scenes))
+            s = summarize(sample_frames(net, body, frames, prep, vol, options_of(args, a), args.batch, args.seed,
+                                        scenes, quiet=args.quiet, desc=f"egohmr tune {g} a={a:g}"))
             rows.append({"guide": g, "scale": a, **s})
             cands.append((a, s))
             print(f"{g:8s} a={a:<8g} MPJPE {s['mpjpe_mm']:.1f}  collision {s['collision_ratio']:.4f}")

@@ -1,6 +1,8 @@
 """Plausibility of a user's frame and scene (`volsmpl egohmr sample --frame F.json --scene S`), checked before any
 network runs. What is clearly wrong is refused in one line naming the option or field and the fix; what is merely
-unusual is a warning (stderr and results.json's `warnings`).
+unusual is a warning (stderr and results.json's `warnings`). The size is checked on an overview of the whole scene,
+the up axis and the camera's place on the scene around the camera (user_scene.read_user_inputs), so a scan of any
+size is judged by the room the person is in.
 
 - the scene's size after --units, against a person's: a robust extent (the largest of the 0.5-99.5 percentile
   ranges along the axes) above EXTENT_REFUSE[1] or below EXTENT_REFUSE[0] metres is refused, naming the --units

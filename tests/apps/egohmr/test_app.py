@@ -190,7 +190,7 @@ def test_user_frame_of_another_resolution_is_refused(tmp_path):
 def test_user_frame_and_scan_run_end_to_end(tmp_path, frames, tiny_ckpt):
     """A generated frame written as a user's files: the room scan in world millimetres, the camera as
     world_to_camera; the run must read both and see the same camera-frame scene as the generator."""
-    from volsmpl.apps.egohmr.data import make_group, scene_mesh
+    from volsmpl.apps.egohmr.data import scene_mesh
     from volsmpl.apps.egohmr.userframe import camera_points, load_user_frame
     from volsmpl.scene import make_room
 

@@ -1,7 +1,6 @@
 """The egocentric app's pose, diffusion, guidance and metrics against closed forms and exact references."""
 from __future__ import annotations
 
-import numpy as np
 import pytest
 import torch
 import trimesh

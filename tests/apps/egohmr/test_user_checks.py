@@ -101,7 +101,8 @@ def test_scene_in_millimetres_read_as_metres_is_refused_naming_units(files, caps
 def test_scene_turned_z_up_is_refused_without_up_z(files, capsys, tmp_path):
     from types import SimpleNamespace
 
-    from volsmpl.apps.egohmr.user_run import read_user_inputs
+    from volsmpl.apps.egohmr.user_scene import read_user_inputs
+    from volsmpl.apps.egohmr.userframe import camera_points
 
     room = box_room()
     z_up = np.stack([room[:, 0], -room[:, 2], room[:, 1]], 1)       # the same room, z up
@@ -114,9 +115,10 @@ def test_scene_turned_z_up_is_refused_without_up_z(files, capsys, tmp_path):
     # with --up z the z-up scan is the Y-up room: accepted without a warning, the camera 1.6 m above its floor
     warnings = []
     args = SimpleNamespace(frame=frame, scene=str(tmp_path / "z.npy"), units="m", up="z", seed=0)
-    f, cam = read_user_inputs(args, warnings)
+    f, scan, up = read_user_inputs(args, warnings)
     assert warnings == []
-    assert np.allclose(cam, (room @ np.diag([-1.0, -1.0, 1.0]).T) + [0.5, 1.6, 1.5])
+    assert np.allclose(camera_points(f, scan.vertices), (room @ np.diag([-1.0, -1.0, 1.0]).T) + [0.5, 1.6, 1.5])
+    assert up[1] > math.cos(math.radians(5))                         # the floor faces +y of the Y-up world
 
 
 def test_floor_estimate_needs_a_room_around_it():
@@ -175,6 +177,8 @@ def test_camera_far_outside_the_scene_is_refused(files, capsys, tmp_path):
     (["sample", "--scene", "s.ply", "--units", "mm"],
      "--scene, --units describe the scene of a user's frame: add --frame"),
     (["sample", "--up", "z"], "--up describes the scene of a user's frame"),
+    (["sample", "--spacing", "0.02"], "--spacing describes the scene of a user's frame"),
+    (["tune", "--save-meshes"], "--save-meshes does not apply to `volsmpl egohmr tune`"),
     (["sample", "--frame", "f.json"], "--frame needs the frame's scene: add --scene"),
     (["tune", "--scale", "volsmpl=3"], "--scale does not apply to `volsmpl egohmr tune`"),
     (["tune", "--model", "none"], "tune sweeps the guides' scales"),
@@ -201,6 +205,9 @@ def test_options_the_mode_does_not_read_are_refused(argv, said, capsys, tmp_path
     (["--plain-factor", "-1"], "--plain-factor -1: give a finite number >= 0"),
     (["--frames", "0"], "--frames 0: give a finite number >= 1"),
     (["--batch", "0"], "--batch 0: give a finite number >= 1"),
+    (["--frame", "f.json", "--scene", "s.ply", "--spacing", "0.2"],
+     "--spacing 0.2: give a finite number >= 0.005 and <= 0.0894427"),
+    (["--frame", "f.json", "--scene", "s.ply", "--spacing", "0.001"], "--spacing 0.001: give a finite number >= 0.005"),
 ])
 def test_numbers_out_of_range_are_refused(argv, said, capsys, tmp_path):
     rc, err = run(["sample", *argv, "--out", str(tmp_path / "o")], capsys)
