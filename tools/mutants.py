@@ -360,6 +360,15 @@ MUTANTS = {
                               [T + "apps/selfpen/test_limits.py::test_an_arm_cross_is_repaired_by_the_arms_alone_within_the_limits"]),
     "selfpen_beyond_limits_not_flagged": ("apps/selfpen/optimize.py", "    elif res.limits_after:", "    elif False:",
                                           [T + "apps/selfpen/test_limits.py::test_without_the_bounds_the_spine_folds_and_the_repair_is_flagged"]),
+    "egohmr_cube_box_not_turned_to_the_world": ("apps/egohmr/user_scene.py", "    world = (corners - t) @ R          # R^T (c - t), row vectors",
+                                                "    world = corners",
+                                                [T + "apps/egohmr/test_user_scene.py::test_points_in_the_cube_are_area_over_spacing_squared_on_any_size"]),
+    "egohmr_body_pelvis_in_camera_frame": ("apps/egohmr/bodies.py", "        pelvis = (pelvis - t) @ R", "        pelvis = pelvis - t",
+                                           [T + "apps/egohmr/test_examples.py::test_record_params_rebuild_the_mesh_file_in_the_scan_frame"]),
+    "egohmr_table_meshes_always": ("apps/egohmr/run.py", "            if args.save_meshes and v is not None:", "            if v is not None:",
+                                   [T + "apps/egohmr/test_table_bodies.py::test_meshes_only_with_save_meshes_made_from_the_record"]),
+    "egohmr_figure_without_keypoints": ("apps/egohmr/figures.py", "        draw_confident_keypoints(img, frame.keypoints * s, frame.conf)\n", "",
+                                        [T + "apps/egohmr/test_examples.py::test_example_writes_bodies_meshes_and_figure"]),
 }
 
 
