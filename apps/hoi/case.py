@@ -10,12 +10,14 @@ The body frame is the body model's output (`body(betas, global_orient, body_pose
 frame is the template's (volsmpl.scene.objects: resting on y = 0, front +Z) or the mesh file's own, in metres after
 `units`. A similarity maps a frame into the camera frame: x_cam = scale * R @ x + t.
 
-JSON (format 'volsmpl-hoi-case', version 1):
+JSON (format 'volsmpl-hoi-case', version 2; version-1 files read as they are):
 
-    {"format": "volsmpl-hoi-case", "version": 1, "name": "cup_0007",
+    {"format": "volsmpl-hoi-case", "version": 2, "name": "cup_0007",
      "body": {"fingerprint": "dc5681ccaf7defe3", "betas": [10], "global_orient": [3], "body_pose": [69], "transl": [3]},
      "object": {"category": "cup", "template_seed": 7}            # a template of volsmpl.scene.objects, or
-               {"category": "cup", "mesh": "mug.obj", "units": "mm"},   # any mesh file trimesh reads (path relative to the JSON)
+               {"category": "cup", "mesh": "mug.obj", "units": "mm",  # any mesh file trimesh reads (relative to the JSON)
+                "size_m": 0.12,                                    # optional: its real largest extent (metres)
+                "regions": {"handle": [12, 13, ...]}},             # optional: named regions, triangle ids of the file
      "camera": {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], "image_size": [H, W]},
      "keypoints_2d": [[u, v, confidence] x 24],                    # the body's 24 joints, SMPL order; confidence in [0, 1], 0: unseen
      "silhouette": [[u, v], ...],                                  # pixels of the object's mask (a sample of them)
@@ -27,7 +29,14 @@ JSON (format 'volsmpl-hoi-case', version 1):
     SIM = {"scale": s, "rotation": [[3 x 3]], "translation": [3]}
 
 Body parts are the partition's (volsmpl.Partition(body).table.part_names); regions are the template's
-(`ObjectTemplate.regions`), or 'any'.
+(`ObjectTemplate.regions`), a mesh file's own `regions`, or 'any'.
+
+Version 2 adds to a mesh file's object: `size_m`, the object's real largest bounding-box extent in metres (it sets
+the scale prior in place of the category's mean size, volsmpl.scene.objects.SIZE_PRIOR), which lets the category be
+any name (teddy, tray), not only a template's; and `regions`, {name: [triangle ids]} (0-based, the triangles as
+trimesh reads the file with process=False: a quad is two triangles). A case that uses neither is written as
+version 1 (`case_to_dict`), byte for byte as before. `volsmpl hoi make-case` (apps/hoi/make_case.py) writes a case
+from a user's mesh, body, camera, mask and contacts.
 """
 from __future__ import annotations
 
@@ -38,7 +47,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-FORMAT, VERSION = "volsmpl-hoi-case", 1
+FORMAT, VERSION = "volsmpl-hoi-case", 2
+READS = (1, 2)  # the versions this volsmpl reads
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 ANY_REGION = "any"
 
@@ -93,6 +103,8 @@ class HoiCase:
     template_seed: int | None = None
     mesh_path: str | None = None
     units: str = "m"
+    size_m: float | None = None  # the object's real largest extent (metres): sets the scale prior (a mesh file only)
+    regions: dict = field(default_factory=dict)  # {name: triangle ids (R,) int64} of a mesh file's own regions
     image: str | None = None
     meta: dict = field(default_factory=dict)  # free-form notes of the producer (e.g. the database's kind), kept in the JSON
     source: Path | None = field(default=None, repr=False)  # folder of the JSON (relative paths)
@@ -116,18 +128,23 @@ def case_from_dict(d: dict, source: Path | None = None) -> HoiCase:
     where = f"case {d.get('name', '?')!r}" if isinstance(d, dict) else "case"
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise ValueError(f"{where} is not a human-object case (expected \"format\": \"{FORMAT}\")")
-    if d.get("version") != VERSION:
-        raise ValueError(f"{where} has version {d.get('version')!r}; this volsmpl reads version {VERSION}")
+    if d.get("version") not in READS:
+        raise ValueError(f"{where} has version {d.get('version')!r}; this volsmpl reads versions "
+                         f"{', '.join(map(str, READS))}")
     b, o, cam = d.get("body"), d.get("object"), d.get("camera")
     if not isinstance(b, dict) or not isinstance(o, dict) or not isinstance(cam, dict):
         raise ValueError(f"{where}: 'body', 'object' and 'camera' must be objects")
     body = {k: torch.as_tensor(_array(b, k, (n,), f"{where} body"), dtype=torch.float32)
             for k, n in (("betas", 10), ("global_orient", 3), ("body_pose", 69), ("transl", 3))}
-    category = o.get("category")
-    if category not in CATEGORIES:
-        raise ValueError(f"{where}: unknown object category {category!r}; known: {', '.join(CATEGORIES)}")
     if ("mesh" in o) == ("template_seed" in o):
         raise ValueError(f"{where}: 'object' needs exactly one of 'mesh' (a file) or 'template_seed' (a template)")
+    size_m = _size(o, where)
+    category = o.get("category")
+    if category not in CATEGORIES and not ("mesh" in o and size_m is not None and isinstance(category, str)
+                                           and category.strip()):
+        raise ValueError(f"{where}: unknown object category {category!r}; known: {', '.join(CATEGORIES)} (another "
+                         f"name needs a mesh file and its size: \"size_m\" in the object)")
+    regions = _regions(o, where)
     units = o.get("units", "m")
     if units not in UNITS:
         raise ValueError(f"{where}: object units {units!r} unknown; use one of {', '.join(UNITS)}")
@@ -154,7 +171,45 @@ def case_from_dict(d: dict, source: Path | None = None) -> HoiCase:
         truth=None if truth is None else {k: Similarity.from_dict(truth.get(k), f"{where} truth.{k}")
                                           for k in ("human", "object")},
         template_seed=None if "template_seed" in o and o["template_seed"] is None else o.get("template_seed"),
-        mesh_path=o.get("mesh"), units=units, image=d.get("image"), meta=dict(d.get("meta") or {}), source=source)
+        mesh_path=o.get("mesh"), units=units, size_m=size_m, regions=regions, image=d.get("image"),
+        meta=dict(d.get("meta") or {}), source=source)
+
+
+def _size(o: dict, where: str) -> float | None:
+    """The object's optional 'size_m' (a mesh file only): a finite length > 0, or None."""
+    if o.get("size_m") is None:
+        return None
+    if "mesh" not in o:
+        raise ValueError(f"{where}: 'size_m' goes with a mesh file; a template's size is its own (drop 'size_m')")
+    try:
+        size = float(o["size_m"])
+    except (TypeError, ValueError):
+        size = float("nan")
+    if not (np.isfinite(size) and size > 0):
+        raise ValueError(f"{where}: object 'size_m' {o['size_m']!r} must be a finite length > 0 (metres, the "
+                         f"object's largest extent)")
+    return size
+
+
+def _regions(o: dict, where: str) -> dict:
+    """The object's optional 'regions' (a mesh file only): {name: sorted unique triangle ids (R,) int64}."""
+    regions = o.get("regions") or {}
+    if regions and "mesh" not in o:
+        raise ValueError(f"{where}: 'regions' goes with a mesh file; a template has its own (drop 'regions')")
+    try:
+        items = list(regions.items())
+    except AttributeError:
+        raise ValueError(f"{where}: object 'regions' must be an object {{name: [triangle ids]}}") from None
+    out = {}
+    for name, ids in items:
+        a = np.asarray(ids)
+        if name == ANY_REGION or not name:
+            raise ValueError(f"{where}: object region name {name!r} is reserved or empty; give the region another name")
+        if a.ndim != 1 or len(a) == 0 or not (np.issubdtype(a.dtype, np.integer) and (a >= 0).all()):
+            raise ValueError(f"{where}: object region {name!r} must be a non-empty list of triangle ids (integers "
+                             f">= 0)")
+        out[str(name)] = np.unique(a.astype(np.int64))
+    return out
 
 
 def case_to_dict(case: HoiCase) -> dict:
@@ -162,9 +217,15 @@ def case_to_dict(case: HoiCase) -> dict:
     obj = {"category": case.category}
     if case.mesh_path is not None:
         obj.update(mesh=case.mesh_path, units=case.units)
+        if case.size_m is not None:
+            obj["size_m"] = float(case.size_m)
+        if case.regions:
+            obj["regions"] = {k: np.asarray(v).tolist() for k, v in case.regions.items()}
     else:
         obj["template_seed"] = case.template_seed
-    d = {"format": FORMAT, "version": VERSION, "name": case.name,
+    # version 1 when nothing of version 2 is used: the database's files and the fits' keys stay as they were
+    version = VERSION if case.size_m is not None or case.regions else 1
+    d = {"format": FORMAT, "version": version, "name": case.name,
          "body": {"fingerprint": case.fingerprint, **{k: v.tolist() for k, v in case.body.items()}},
          "object": obj, "camera": {"K": case.K.tolist(), "image_size": list(case.image_size)},
          "keypoints_2d": case.keypoints_2d.tolist(), "silhouette": case.silhouette.tolist(),
@@ -233,27 +294,58 @@ def mesh_digest(case: HoiCase) -> str | None:
     return None if p is None else file_sha256(p)
 
 
-def object_mesh(case: HoiCase, template=None):
-    """The object's mesh in its own frame (metres) and its regions {name: face ids} (empty for a mesh file).
-
-    template: the case's object_template when already built. A mesh file must hold triangles with finite
-    vertices; its units are converted by `units`."""
+def read_object_mesh(path, units: str = "m", where: str = "the object mesh"):
+    """A mesh file as a trimesh.Trimesh in metres, its triangles as trimesh reads them (process=False: the file's
+    order, a quad as two triangles), the ids that a case's `regions` name. ValueError naming the file and the fix
+    for an unreadable file, one without triangles or with NaN / Inf vertices, or unknown units."""
     import trimesh
 
+    if units not in UNITS:
+        raise ValueError(f"{where}: units {units!r} unknown; use one of {', '.join(UNITS)}")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as e:  # trimesh raises many kinds for unreadable files
+        raise ValueError(f"{where}: cannot read the object mesh {path} ({e}); use a common format (obj, ply, stl, glb, "
+                         f"off)") from e
+    if len(getattr(mesh, "faces", ())) == 0:
+        raise ValueError(f"{where}: the object mesh {path} has no triangles (a point cloud?); give a triangle mesh")
+    if not np.isfinite(mesh.vertices).all():
+        raise ValueError(f"{where}: the object mesh {path} has NaN or Inf vertices")
+    return trimesh.Trimesh(np.asarray(mesh.vertices) * UNITS[units], np.asarray(mesh.faces), process=False)
+
+
+def object_mesh(case: HoiCase, template=None):
+    """The object's mesh in its own frame (metres) and its regions {name: triangle ids}: the template's, or a mesh
+    file's own (the case's `regions`; empty when it names none).
+
+    template: the case's object_template when already built. A mesh file must hold triangles with finite
+    vertices (read_object_mesh); its units are converted by `units`; its regions' ids must be its triangles'."""
     if case.mesh_path is None:
         tmpl = template if template is not None else object_template(case)
         return tmpl.mesh, dict(tmpl.regions)
     p = mesh_file(case)
-    try:
-        mesh = trimesh.load(p, force="mesh", process=False)
-    except Exception as e:  # trimesh raises many kinds for unreadable files
-        raise ValueError(f"case {case.name!r}: cannot read the object mesh {p} ({e}); use a common format (obj, ply, stl, glb, off)") from e
-    if len(mesh.faces) == 0:
-        raise ValueError(f"case {case.name!r}: the object mesh {p} has no triangles (a point cloud?); give a triangle mesh")
-    if not np.isfinite(mesh.vertices).all():
-        raise ValueError(f"case {case.name!r}: the object mesh {p} has NaN or Inf vertices")
-    mesh = trimesh.Trimesh(np.asarray(mesh.vertices) * UNITS[case.units], np.asarray(mesh.faces), process=False)
-    return mesh, {}
+    mesh = read_object_mesh(p, case.units, f"case {case.name!r}")
+    for name, ids in case.regions.items():
+        if len(ids) and int(ids.max()) >= len(mesh.faces):
+            raise ValueError(f"case {case.name!r}: object region {name!r} names triangle {int(ids.max())}, the mesh "
+                             f"{p} has {len(mesh.faces)} (ids 0..{len(mesh.faces) - 1}): a selection of another mesh?")
+    return mesh, dict(case.regions)
+
+
+def object_size_m(category: str, size_m: float | None = None) -> float:
+    """The object's real largest extent (metres) that its scale prior aims at: `size_m` (a case's) when given, else
+    the category's mean size (volsmpl.scene.objects.SIZE_PRIOR, the largest of height, width and depth).
+
+    Example:
+        >>> object_size_m("cup"), object_size_m("teddy", 0.35)
+        (0.12, 0.35)
+    """
+    from volsmpl.scene.objects import SIZE_PRIOR
+
+    if size_m is not None:
+        return float(size_m)
+    prior = SIZE_PRIOR[category]
+    return float(max(prior[k][0] for k in ("height", "width", "depth") if k in prior))
 
 
 def check_case(case: HoiCase, fingerprint: str, part_names, regions: dict) -> None:

@@ -3,6 +3,8 @@
     volsmpl hoi make-db [--n 100] [--seed 0] [--db FOLDER]       # the interaction database (apps/hoi/database.py)
     volsmpl hoi --model volsmpl,coap,mesh --split test --out out/hoi   # fit the test half, results.json + figures
     volsmpl hoi fit --case my_case.json --model volsmpl --out out/hoi_fit   # a user's own case file (apps/hoi/case.py)
+    volsmpl hoi make-case --object mug.obj --units mm --category cup --body pose.json --image-size 480,640 \
+        --focal 600 --mask mask.png --contact right_hand:handle --out my_case.json   # that file, without code (make_case.py)
     volsmpl hoi tune --model volsmpl --cases 13 --out docs/hoi    # the image weights on the tuning half (tune.py)
 
 Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<kind>, the paper's Table 3, per-case
@@ -10,6 +12,13 @@ records per kind, figures, meta), OUT/case_<name>.png for the first --render cas
 finished fit is also kept in OUT/cases/<case>_<kind>.json with the key of what made it (configuration, the case's
 content, the kind's weights, the source code), so a run stopped at any moment continues with --resume, fitting
 only the cases without a matching record.
+
+Each case record holds what a user takes away (apps/hoi/fit.py): the fitted body (`body`: params, joints and
+placement) and the fitted object (`object`: similarity, category, first-stage similarity), in the camera frame
+(OpenCV axes, metres). Mesh files of the fitted body and the placed object, OUT/meshes/<case>/<kind>_body.ply and
+<kind>_object.ply (camera frame, metres), are written for `fit` always and for a table run with --save-meshes;
+they are made from the records (a reused record writes them too) and listed in the record's `meshes` (paths
+relative to OUT). A progress bar runs over the cases and over each fit's steps, on a terminal only (--quiet: none).
 """
 from __future__ import annotations
 
@@ -27,10 +36,11 @@ from volsmpl.apps.table import (CaseRecords, add_common, check_common, check_thr
 from .console import case_line, format_table
 from .plausibility import GOOD
 
-ACTIONS = ("run", "make-db", "fit", "tune")
+ACTIONS = ("run", "make-db", "fit", "tune", "make-case")
 
 
 def add_parser(sub):
+    from . import make_case
     from .fit import FitConfig
 
     d = FitConfig()
@@ -40,7 +50,8 @@ def add_parser(sub):
                                    "(supp. D.1); report time per iteration, collisions and contact per model kind.")
     p.add_argument("action", nargs="?", default="run", choices=ACTIONS,
                    help="run (default): fit database cases; make-db: build the database; fit: one case file; "
-                        "tune: the image weights on the database's tuning half (tune.py)")
+                        "tune: the image weights on the database's tuning half (tune.py); make-case: a case file "
+                        "from your mesh, body, camera, mask and contacts (--out CASE.json, make_case.py)")
     add_common(p, out="out/hoi", seed="the interaction database's seed")
     p.add_argument("--cases", default="all", help="'all', a number N (the first N of the split) or comma-separated names")
     p.add_argument("--split", default=None, choices=["tune", "test", "all"],
@@ -61,6 +72,7 @@ def add_parser(sub):
     p.add_argument("--batch", type=int, default=1,
                    help="cases optimised together (padded; each as if alone); ms/iter is the batch's divided by it")
     p.add_argument("--grid", default="1e4,1e5,1e6,1e7", help="tune: the image weights tried (comma-separated)")
+    make_case.add_arguments(p)
     return p
 
 
@@ -117,10 +129,12 @@ def _cases(args, split: str, database) -> list:
 _COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device"}
 _FIT = {"iters", "lr", "w_keypoints", "w_silhouette", "contact_fraction", "contact_huber"}
 USES = {"make-db": {"n", "seed", "db", "threads"},
-        "run": _COMMON | _FIT | {"resume", "render", "cases", "split", "db", "seed", "batch"},
-        "fit": _COMMON | _FIT | {"resume", "render", "case"},
+        "run": _COMMON | _FIT | {"resume", "render", "cases", "split", "db", "seed", "batch", "save_meshes"},
+        "fit": _COMMON | _FIT | {"resume", "render", "case", "save_meshes"},  # fit writes its meshes always
         "tune": _COMMON | {"iters", "lr", "contact_fraction", "contact_huber", "cases", "split", "db", "seed",
-                           "grid"}}
+                           "grid"},
+        "make-case": {"object", "units", "category", "size_m", "body", "keypoints", "image_size", "focal",
+                      "principal", "K", "object_pose", "mask", "contact", "out"}}
 
 
 def check_options(args) -> None:
@@ -160,6 +174,9 @@ def run(args) -> int:
     from volsmpl.apps.hoi import database
 
     check_options(args)
+    if args.action == "make-case":
+        from .make_case import run as make_case
+        return make_case(args)
     if args.action == "make-db":
         from volsmpl.io.outputs import exclusive_folder
 
@@ -180,9 +197,29 @@ def run(args) -> int:
         return _run(args, models, ckpts)
 
 
+def case_meshes(out, case, kind: str, record: dict, body, save: bool) -> dict:
+    """The mesh files of one case's fit by `kind`, made from its record (fit.placed_meshes; a reused record writes
+    them too): OUT/meshes/<case>/<kind>_body.ply and <kind>_object.ply (camera frame, metres). Returns {'body',
+    'object'}: their paths relative to OUT. save=False writes none and removes those of an earlier run in OUT at
+    these paths (they would not match this run's records); returns {}."""
+    from volsmpl.apps.outputs import mesh_path, write_mesh
+
+    from .fit import placed_meshes
+
+    paths = {what: mesh_path(out, case.name, kind, what) for what in ("body", "object")}
+    if not save:
+        for p in paths.values():
+            p.unlink(missing_ok=True)
+        return {}
+    for what, (v, f) in placed_meshes(case, record, body).items():
+        write_mesh(paths[what], v, f, units="m", up="y")  # the camera frame's metres and axes, as they are
+    return {what: p.relative_to(out).as_posix() for what, p in paths.items()}
+
+
 def _run(args, models: list, ckpts: dict) -> int:
     """`hoi run` / `hoi fit` on a claimed --out."""
     import volsmpl
+    from volsmpl.apps.progress import progress, steps_bar
     from volsmpl.report import paper
     from volsmpl.io.provenance import machine_info
 
@@ -210,7 +247,9 @@ def _run(args, models: list, ckpts: dict) -> int:
               "threads": torch.get_num_threads()}
     store = CaseRecords(out, "hoi", resume=args.resume)
     per_model = {m: [] for m in models}
-    for i0 in range(0, len(cases), args.batch):
+    save = args.action == "fit" or args.save_meshes  # a user's own case: its meshes always
+    for i0 in progress(range(0, len(cases), args.batch), f"hoi {','.join(models)}", quiet=args.quiet,
+                       unit="case" if args.batch == 1 else "batch"):
         group = cases[i0:i0 + args.batch]
         results = {c.name: {} for c in group}
         digests = {c.name: mesh_digest(c) for c in group}  # a user's mesh file: its content, not only its name
@@ -227,11 +266,12 @@ def _run(args, models: list, ckpts: dict) -> int:
                 whole = len(todo) == len(group)
                 if whole:
                     problem = problem or Problem(group, body, vols[m], cfg)
-                for c, r in zip(todo, fit_cases(todo, body, vols[m], cfg, problem if whole else None)):
+                for c, r in zip(todo, fit_cases(todo, body, vols[m], cfg, problem if whole else None,
+                                                progress=steps_bar(args.quiet))):
                     recs[c.name] = asdict(r)
                     store.put(f"{safe_name(c.name)}_{m}", keys[c.name], recs[c.name])
             for c in group:
-                r = SimpleNamespace(**recs[c.name])
+                r = SimpleNamespace(**recs[c.name], meshes=case_meshes(out, c, m, recs[c.name], body, save))
                 per_model[m].append(r)
                 results[c.name][m] = r
                 print(case_line(c.name, m, r) + ("" if c in todo else "  (reused)"))
@@ -256,4 +296,6 @@ def _run(args, models: list, ckpts: dict) -> int:
     print(format_table(summary))
     print_flagged(flagged)
     print(f"wrote {out / 'results.json'}")
+    if save:
+        print(f"wrote the fitted bodies and objects under {out / 'meshes'} (.ply, camera frame, metres)")
     return 0

@@ -1,86 +1,137 @@
-"""Figures of the human–object app: a panel per case (the image with the first-stage and fitted projections,
-the fitted 3D pair from two views per model kind with the object vertices inside the body in red) and a summary
-bar chart (time per iteration and collisions per kind). OpenCV drawing, headless."""
+"""Figures of the human–object app: a figure per case and a summary bar chart (time per iteration and
+collisions per kind). OpenCV drawing, headless.
+
+The case figure has a row per placement: the first stage, the ground truth (where the case has one) and each
+model kind's fit; a fit whose object is lost or that diverged is named in its row, not drawn (it spans
+kilometres). Each row's columns are apps/hoi/views.py's: the camera view over the case's image, a close-up framed
+on the contact and a side view of the body, with the object's vertices inside the body in red on top.
+"""
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import torch
-
-from volsmpl.viz.render import grid, render_camera_view, render_scene, save_png
+from volsmpl.viz.render import save_png
 
 from .case import Similarity
+from .views import BODY, INSIDE, OBJECT, PlacementViews, body_facing
 
-BODY, OBJECT, INSIDE = (0.78, 0.78, 0.78), (0.35, 0.55, 0.85), (0.9, 0.1, 0.1)
+__all__ = ["BODY", "COLUMNS", "INSIDE", "NOT_DRAWN", "OBJECT", "case_geometry", "case_panel", "case_views",
+           "coarse_body", "summary_plot"]
+
 NOT_DRAWN = ("diverged", "object_lost")  # fit statuses (plausibility.judge_fit) whose placement is not drawn
+COLUMNS = ("camera view", "contact close-up", "side of the body")
+HEADER = 24  # pixels: the strip above each row (and the column titles) with its text
+COARSE_TRIANGLES = 4000  # the body's triangles in the wide views
 
 
-def case_camera(case):
-    """The case's pinhole (camera frame = world) as a kornia PinholeCamera."""
-    from kornia.geometry.camera import PinholeCamera
-
-    K = torch.eye(4, dtype=torch.float64)[None]
-    K[0, :3, :3] = torch.as_tensor(case.K)
-    H, W = case.image_size
-    return PinholeCamera(K, torch.eye(4, dtype=torch.float64)[None], torch.tensor([float(H)]), torch.tensor([float(W)]))
+def _sim(s) -> Similarity:
+    return s if isinstance(s, Similarity) else Similarity.from_dict(s, "placement")
 
 
-def _placed(problem, sim: dict, i: int):
-    sh, so = (Similarity.from_dict(_sim(sim[k]), k) for k in ("human", "object"))
-    v = sh.apply(problem.body_v[i].cpu().numpy())
-    o = so.apply(np.asarray(problem.meshes[i].vertices))
-    return v, o
-
-
-def _sim(s):
-    return s if isinstance(s, dict) else s.to_dict()
-
-
-def _inside(problem, sim: dict, i: int) -> np.ndarray:
-    """Object vertices inside the placed body (exact mesh test), (N,) bool."""
+def _inside(body_v: np.ndarray, faces, obj_v: np.ndarray) -> np.ndarray:
+    """Object vertices inside the body mesh (exact mesh test), (N,) bool."""
     from volsmpl.geometry.point_mesh_distance import mesh_signed_distance
 
-    v, o = _placed(problem, sim, i)
-    d = mesh_signed_distance(torch.as_tensor(v), problem.faces.cpu(), torch.as_tensor(o), closed=True)
+    d = mesh_signed_distance(torch.as_tensor(body_v), torch.as_tensor(np.asarray(faces)), torch.as_tensor(obj_v),
+                             closed=True)
     return (d < 0).numpy()
 
 
-def case_panel(path, problem, results: dict, i: int = 0, size: int = 320) -> None:
-    """Case i of a Problem: [image or first-stage view, first-stage view] + per model [fitted camera view, fitted
-    side view]."""
-    case, faces, obj_faces = problem.cases[i], np.asarray(problem.faces.cpu()), np.asarray(problem.meshes[i].faces)
-    cam = case_camera(case)
-    images, labels = [], []
+def coarse_body(vertices: np.ndarray, faces, triangles: int = COARSE_TRIANGLES) -> tuple[np.ndarray, np.ndarray]:
+    """The body mesh with about `triangles` triangles (open3d's quadric decimation), for the wide views: a figure's
+    cost is its triangles. Returns (vertices, faces); the mesh as it is when it has no more."""
+    import open3d as o3d
+
+    if len(faces) <= triangles:
+        return np.asarray(vertices, np.float64), np.asarray(faces, np.int64)
+    m = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(vertices, np.float64)),
+                                  o3d.utility.Vector3iVector(np.asarray(faces, np.int32)))
+    m = m.simplify_quadric_decimation(target_number_of_triangles=triangles)
+    return np.asarray(m.vertices), np.asarray(m.triangles, np.int64)
+
+
+def case_geometry(problem, i: int = 0) -> dict:
+    """What every view of case i of a Problem shares (before a placement moves it): the posed body (its frame) and
+    its coarse copy, the object's mesh as given (its frame), its even vertices (the Problem's), the contact parts'
+    vertices (body frame) and the body's front."""
+    from .case import object_mesh, object_template
+
+    case = problem.cases[i]
+    v, faces = problem.body_v[i].double().cpu().numpy(), np.asarray(problem.faces.cpu())
+    parts = [p[0] for p, c in zip(problem.pairs, problem.pair_case.tolist()) if c == i]
+    mesh, _ = object_mesh(case, object_template(case))
+    return {"body": (v, faces), "coarse": coarse_body(v, faces), "object": mesh,
+            "object_points": np.asarray(problem.meshes[i].vertices, np.float64),
+            "parts": torch.cat(parts).double().cpu().numpy() if parts else np.zeros((0, 3)),
+            "facing": body_facing(case.body["global_orient"])}
+
+
+def case_views(problem, sim: dict, i: int = 0, geometry: dict | None = None) -> PlacementViews:
+    """The views of case i of a Problem placed by sim {'human', 'object'}: Similarity or its dict (a fit record's
+    `human` / `object`); geometry: case_geometry(problem, i) when already made. The views' `share_inside` is the
+    share of the object's (even) vertices inside the body."""
+    g = geometry or case_geometry(problem, i)
+    h, o = _sim(sim["human"]), _sim(sim["object"])
+    (v, faces), (cv, cf) = g["body"], g["coarse"]
+    v, cv = h.apply(v), h.apply(cv)
+    points = o.apply(g["object_points"])
+    inside = _inside(v, faces, points)
+    views = PlacementViews(v, faces, o.apply(np.asarray(g["object"].vertices, np.float64)),
+                           np.asarray(g["object"].faces), points[inside], h, g["parts"], g["facing"],
+                           coarse=(cv, cf), obj_points=points)
+    views.share_inside = float(inside.mean())
+    return views
+
+
+def _text(img: np.ndarray, text: str, x: int, y: int, scale: float = 0.5, bold: int = 1) -> None:
+    cv2.putText(img, text, (x, y), cv2.FONT_HERSHEY_SIMPLEX, scale, (20, 20, 20), bold, cv2.LINE_AA)
+
+
+def _strip(width: int, text: str) -> np.ndarray:
+    strip = np.full((HEADER, width, 3), 255, np.uint8)
+    _text(strip, text, 6, HEADER - 7)
+    return strip
+
+
+def _image(case) -> np.ndarray | None:
     if case.image and case.source is not None and (case.source / case.image).is_file():
-        img = cv2.cvtColor(cv2.imread(str(case.source / case.image)), cv2.COLOR_BGR2RGB)
-        images.append(img)
-        labels.append("image")
-    states = [("first stage", {k: _sim(s) for k, s in case.init.items()})]
-    states += [(f"fit {m}", {"human": r.human, "object": r.object}) for m, r in results.items()
-               if getattr(r, "status", None) not in NOT_DRAWN]
-    lost = [f"{m}: {r.status}" for m, r in results.items() if getattr(r, "status", None) in NOT_DRAWN]
-    for label, sim in states:
-        v, o = _placed(problem, sim, i)
-        ins = _inside(problem, sim, i)
-        images.append(render_camera_view([(v, faces, BODY), (o, obj_faces, OBJECT)], cam,
-                                         points=o[ins], point_colors=INSIDE))
-        labels.append(f"{label} ({ins.mean() * 100:.1f}% inside)")
-    up = np.diag([1.0, -1.0, -1.0])  # camera frame (y down, z forward) -> a Y-up frame for the side view
-    centre = np.concatenate(_placed(problem, states[-1][1], i)).mean(0) @ up
-    for label, sim in states[1:]:
-        v, o = (x @ up for x in _placed(problem, sim, i))
-        ins = _inside(problem, sim, i)
-        images.append(render_scene([(v, faces, BODY), (o, obj_faces, OBJECT)], size=size,
-                                   yaw=90.0, center=centre, points=o[ins], point_colors=INSIDE))
-        labels.append(f"{label}, side")
-    if lost:  # a fit that lost its object spans kilometres: named, not drawn
-        images.append(np.full((size, size, 3), 255, np.uint8))
-        labels.append("not drawn: " + ", ".join(lost))
-    h = max(im.shape[0] for im in images)
-    images = [cv2.resize(im, (int(im.shape[1] * size / h), size)) if im.shape[0] != size else im for im in images]
-    w = max(im.shape[1] for im in images)
-    images = [np.pad(im, ((0, 0), (0, w - im.shape[1]), (0, 0)), constant_values=255) for im in images]
-    save_png(path, grid(images, labels, cols=len(states) + (1 if len(images) > 2 * len(states) - 1 else 0)))
+        img = cv2.imread(str(case.source / case.image))
+        return None if img is None else cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return None
+
+
+def case_panel(path, problem, results: dict, i: int = 0, size: int = 300) -> None:
+    """Case i of a Problem (module docstring): rows of [camera view, contact close-up, side view], each titled with
+    its placement and the share of the object's vertices inside the body; `results`: kind -> fit record (with
+    `human`, `object`, `status`, and `after`)."""
+    case = problem.cases[i]
+    image = _image(case)
+    rows = [("first stage", case.init, {})]
+    if case.truth is not None:
+        rows.append(("ground truth", case.truth, {}))
+    rows += [(f"fit {m}", {"human": r.human, "object": r.object}, r) for m, r in results.items()]
+    width = size * len(COLUMNS)
+    side = None  # the first stage's side of the body, kept for every row (close-up and side view)
+    geometry = case_geometry(problem, i)
+    out = [np.concatenate([_strip(size, t) for t in COLUMNS], axis=1)]
+    for label, sim, r in rows:
+        status = getattr(r, "status", None)
+        if status in NOT_DRAWN:  # a fit that lost its object spans kilometres: named, not drawn
+            out.append(_strip(width, f"{label}: {status}, not drawn ({getattr(r, 'status_why', '')})"[:110]))
+            continue
+        views = case_views(problem, sim, i, geometry)
+        after = getattr(r, "after", {}) or {}
+        note = f", contact {after['contact_cm']:.1f} cm" if after.get("contact_cm") is not None else ""
+        out.append(_strip(width, f"{label}: {views.share_inside * 100:.1f}% of the object inside the body{note}"
+                                 + (f" [{status}]" if status not in (None, "converged") else "")))
+        side = side or views.object_side()
+        panels = [views.camera_view(case.K, image, size), views.close_up(size, side),
+                  views.side_view(size, side)]
+        for p in panels:  # a thin frame between the panels
+            p[:, -1] = p[-1, :] = 200
+        out.append(np.concatenate(panels, axis=1))
+    save_png(path, np.concatenate(out, axis=0))
 
 
 def summary_plot(path, summary: dict) -> None:

@@ -16,6 +16,12 @@ Cases are batched (apps/hoi/problem.py: padded and masked where their sizes diff
 
     res = fit_case(case, body, volume, FitConfig())
     a, b = fit_cases([case_a, case_b], body, volume, FitConfig())
+    meshes = placed_meshes(case, asdict(res), body)   # {'body': (V, F), 'object': (V, F)}, camera frame, metres
+
+What a result holds for a user (FitResult): the fitted body (`body`: volsmpl.apps.outputs.body_record, its params
+in the body model's frame, its joints and its placement in the camera frame) and the fitted object (`object`: its
+similarity into the camera frame, its category and the first stage's similarity). The frame of both is the
+camera's (OpenCV axes: x right, y down, z forward; metres), the frame of the case (apps/hoi/case.py).
 """
 from __future__ import annotations
 
@@ -33,9 +39,11 @@ from .losses import keypoint_term, penetration, scale_prior, silhouette_term, to
 from .plausibility import judge_fit
 from .problem import Problem, object_scale_prior
 
-__all__ = ["FitConfig", "FitResult", "Problem", "fit_case", "fit_cases", "case_metrics", "object_scale_prior"]
+__all__ = ["CAMERA_FRAME", "FitConfig", "FitResult", "Problem", "body_placed_record", "case_metrics", "fit_case",
+           "fit_cases", "object_record", "object_scale_prior", "placed_meshes"]
 
 CONTACT_RADIUS = 0.02  # metres: ground-truth contact regions are the points within this distance of the other surface
+CAMERA_FRAME = "camera (OpenCV axes: x right, y down, z forward; metres)"  # the frame of a case's placements
 
 
 @dataclass
@@ -95,14 +103,15 @@ class FitResult:
     ms_per_iter: float
     total_s: float
     peak_mem_mb: float
-    human: dict  # fitted similarity (Similarity.to_dict)
-    object: dict
+    human: dict  # fitted similarity of the body into the camera frame (Similarity.to_dict)
+    object: dict  # object_record: the fitted similarity, the category and the first stage's similarity
     before: dict = field(default_factory=dict)  # case_metrics of the first-stage estimates
     after: dict = field(default_factory=dict)  # case_metrics of the fit
     loss: list = field(default_factory=list)  # total loss every 50 steps
     batch: int = 1  # cases optimised together (ms_per_iter and total_s are the batch's divided by it)
     status_why: str = ""  # the reason of a status other than 'converged'
     stop: str = ""  # the optimiser's stop rule (volsmpl.optim: 'max_iters', 'converged', ...)
+    body: dict = field(default_factory=dict)  # body_placed_record: params, joints and placement (camera frame)
 
 
 def _terms(problem: Problem, volume, cfg: FitConfig) -> dict:
@@ -111,7 +120,7 @@ def _terms(problem: Problem, volume, cfg: FitConfig) -> dict:
     terms = {
         "contact": Term(lambda s: s.placed["contact"], cfg.w_contact),
         "normal": Term(lambda s: s.placed["normal"], cfg.w_normal),
-        "penetration": Term(lambda s: penetration(problem.query, s.placed["obj_body"], problem.obj_mask), w_pen),
+        "penetration": Term(lambda s: penetration(problem.query, s.placed["pen_body"], problem.pen_mask), w_pen),
         "scale": Term(lambda s: scale_prior(s.placed["object"][0], problem.prior_object)
                       + scale_prior(s.placed["human"][0], 1.0), cfg.w_scale),
         "keypoints": Term(lambda s: keypoint_term(s.placed["joints_cam"], problem.kp, problem.K), cfg.w_keypoints),
@@ -121,18 +130,63 @@ def _terms(problem: Problem, volume, cfg: FitConfig) -> dict:
     return {k: t for k, t in terms.items() if t.weight > 0}  # a term weighted 0 is not evaluated
 
 
-def fit_cases(cases: list, body, volume, cfg: FitConfig = FitConfig(), problem: Problem | None = None) -> list:
+def body_placed_record(output, i: int, human: Similarity, first_stage: Similarity | None = None) -> dict:
+    """The i-th body of a `BodyOutput` (the body model's frame) placed in the camera frame by `human`, as a JSON
+    record: volsmpl.apps.outputs.body_record (params in the body model's frame; joints in the camera frame,
+    metres, units 'm', up 'y': the camera frame's axes kept as they are), plus `frame`, `placement` (the
+    similarity: camera = scale * rotation @ body(params) + translation) and `first_stage` (the case's)."""
+    from types import SimpleNamespace
+
+    from volsmpl.apps.outputs import body_record
+
+    joints = human.apply(output.joints[i].detach().double().cpu().numpy())
+    placed = SimpleNamespace(joints=joints[None], **{k: getattr(output, k)[i:i + 1]
+                                                     for k in ("betas", "global_orient", "body_pose", "transl")})
+    rec = body_record(placed, 0, units="m", up="y")
+    rec.update(frame=CAMERA_FRAME, placement=human.to_dict())
+    if first_stage is not None:
+        rec["first_stage"] = first_stage.to_dict()
+    return rec
+
+
+def object_record(case: HoiCase, fitted: Similarity) -> dict:
+    """The fitted object as a JSON record: its similarity into the camera frame (scale, rotation, translation:
+    camera = scale * rotation @ x + translation, x in the object's own frame, metres), its `category`, `frame`,
+    and `first_stage`, the case's first-stage similarity."""
+    return {**fitted.to_dict(), "category": case.category, "frame": CAMERA_FRAME,
+            "first_stage": case.init["object"].to_dict()}
+
+
+def placed_meshes(case: HoiCase, record: dict, body) -> dict:
+    """{'body': (vertices, faces), 'object': (vertices, faces)} of a fit record (FitResult as a dict) in the
+    camera frame, metres: the body rebuilt from the record's params and placement, the case's object mesh (its
+    own file or template, case.object_mesh) moved by the record's object similarity."""
+    from .case import object_mesh, object_template
+
+    b = record["body"]
+    with torch.no_grad():
+        out = body(**{k: torch.tensor([v], dtype=torch.float32, device=body.v_template.device)
+                      for k, v in b["params"].items()})
+    v = Similarity.from_dict(b["placement"], "body.placement").apply(out.vertices[0].double().cpu().numpy())
+    mesh, _ = object_mesh(case, object_template(case))
+    o = Similarity.from_dict(record["object"], "object").apply(np.asarray(mesh.vertices, dtype=np.float64))
+    return {"body": (v, np.asarray(body.faces)), "object": (o, np.asarray(mesh.faces))}
+
+
+def fit_cases(cases: list, body, volume, cfg: FitConfig = FitConfig(), problem: Problem | None = None,
+              progress: bool | None = None) -> list:
     """Optimise the human and object similarities of B cases together against `volume` (any model kind): one Adam
     over their stacked variables, each case as if alone (their losses are summed); metrics before/after per case.
     `ms_per_iter` of each result is the batch's time per iteration divided by B (the cost of one case's step),
-    `peak_mem_mb` the batch's peak. Returns one FitResult per case, in order."""
+    `peak_mem_mb` the batch's peak. progress: the harness's per-step bar (volsmpl.optim.optimize: None shows it on
+    a terminal, False never; volsmpl.apps.progress.steps_bar). Returns one FitResult per case, in order."""
     problem = (problem or Problem(cases, body, volume, cfg)).prepare(volume)
     if [c.name for c in problem.cases] != [c.name for c in cases]:
         raise ValueError("the problem was built for other cases")
     run = optimize(problem.variables([c.init for c in cases]), _terms(problem, volume, cfg),
                    prepare=lambda s: {"placed": problem.placed(s)}, optimizer="adam", lr=cfg.lr,
-                   max_iters=cfg.iters, frozen=[volume], device=cfg.device, progress=None, usable=problem.usable,
-                   desc=cases[0].name if len(cases) == 1 else f"{len(cases)} cases")
+                   max_iters=cfg.iters, frozen=[volume], device=cfg.device, progress=progress, usable=problem.usable,
+                   desc=f"{cases[0].name if len(cases) == 1 else f'{len(cases)} cases'} {volume.kind}")
     sims = {who: problem.similarity(run.variables, who) for who in ("human", "object")}
     steps, B = run.step_ms(), len(cases)
     results = []
@@ -147,13 +201,14 @@ def fit_cases(cases: list, body, volume, cfg: FitConfig = FitConfig(), problem: 
         else:  # a diverged fit: no placement to measure
             fitted, before, after = None, case_metrics(problem, case.init, i), {}
         status, why = judge_fit(ends, numbers, before, after, run.status[i])
+        placed = fitted or case.init
         results.append(FitResult(
             name=case.name, model=volume.kind, status=status, iterations=run.iterations[i],
             ms_per_iter=float(np.mean(steps)) / B if steps else float("nan"), total_s=run.seconds / B,
             peak_mem_mb=run.peak_bytes / 2 ** 20,
-            human=(fitted or case.init)["human"].to_dict(), object=(fitted or case.init)["object"].to_dict(),
+            human=placed["human"].to_dict(), object=object_record(case, placed["object"]),
             before=before, after=after, loss=[r.total[i] for r in run.records[::50]], batch=B, status_why=why,
-            stop=run.status[i]))
+            stop=run.status[i], body=body_placed_record(problem.out, i, placed["human"], case.init["human"])))
     return results
 
 

@@ -45,13 +45,6 @@ LIMITS = {
 _UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
 
-def _category_size(category: str) -> float:
-    from volsmpl.scene.objects import SIZE_PRIOR
-
-    prior = SIZE_PRIOR[category]
-    return max(prior[k][0] for k in ("height", "width", "depth") if k in prior)
-
-
 def _units_fix(case, extent_m: float, size: float) -> str:
     """The hint of a mis-sized object: the units that bring it nearest its category's size."""
     if case.mesh_path is None:
@@ -69,10 +62,12 @@ def check_case_data(case, mesh, body_vertices: np.ndarray, warn) -> None:
     the posed body in its own frame."""
     from scipy.spatial import cKDTree
 
+    from .case import object_size_m
+
     name, L = f"case {case.name!r}", LIMITS
     where = f" ({case.source / case.mesh_path if case.source else case.mesh_path})" if case.mesh_path else ""
     extent = float(np.asarray(mesh.extents).max())
-    size = _category_size(case.category)
+    size = object_size_m(case.category, case.size_m)
     placed = case.init["object"].scale * extent
     ratio = placed / size
     if not 1 / L["size_refuse"] <= ratio <= L["size_refuse"]:

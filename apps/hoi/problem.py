@@ -8,6 +8,14 @@ contact pairs, which are flattened over the batch (pair p belongs to case `pair_
 body is posed once for all B cases (its pose and shape are the first stage's and stay fixed); contact and
 penetration are measured in each case's body frame.
 
+What the terms see has a fixed budget, whatever the object's mesh: a pair's part vertices (an even stride, at most
+`part_points`), its region's points (`region_points` area-weighted samples), its region's triangles (at most
+`REGION_TRIANGLES`: a region with more is simplified to that many by quadric decimation, `region_triangles`), the
+silhouette's pixels and the projected vertices (strides), and the object points of the penetration term (`pen_v`,
+`pen_mask`): its mesh's vertices after `max_edge_frac` splitting, or PEN_POINTS area-weighted surface samples where
+it has more (a scan of 50k faces costs what a template does). The metrics (fit.case_metrics) measure the exact
+mesh's vertices (`obj_v`), not the budget.
+
     prob = Problem([case_a, case_b], body, volume, FitConfig()).prepare(volume)
     state = prob.variables([case_a.init, case_b.init])    # Variables (B, ...) for volsmpl.optim.optimize
 """
@@ -20,22 +28,59 @@ import torch
 
 from volsmpl.geometry.rotations import matrix_to_rotation_6d, rotation_6d_to_matrix
 
-from .case import ANY_REGION, HoiCase, check_case, object_mesh, object_template
+from .case import ANY_REGION, HoiCase, check_case, object_mesh, object_size_m, object_template
 from .losses import body_query, contact_terms, relative_similarity, to_camera
 
-__all__ = ["Problem", "object_scale_prior"]
+__all__ = ["REGION_TRIANGLES", "Problem", "object_scale_prior", "region_triangles"]
 
 FAR = 1000.0  # metres: where padded object vertices sit (object frame), far outside the body
+#: the most triangles a contact pair's region keeps for the contact term's exact distances: the templates' largest
+#: region (the ball's 'grasp', 1,280), so every template keeps its own; a user's finer mesh is simplified to it
+REGION_TRIANGLES = 1280
+#: the most object points the penetration term reads: the templates' largest vertex count after subdivision
+#: (max_edge_frac), so every template keeps its own vertices; a finer mesh is read at this many surface samples
+PEN_POINTS = 6400
 
 
 def object_scale_prior(case: HoiCase, mesh) -> float:
-    """The object's scale that gives its category's mean real size (volsmpl.scene.objects.SIZE_PRIOR, by the
-    largest bounding-box extent)."""
-    from volsmpl.scene.objects import SIZE_PRIOR
+    """The object's scale that gives its real size by the largest bounding-box extent: the case's `size_m` when it
+    has one, else its category's mean size (volsmpl.scene.objects.SIZE_PRIOR; case.object_size_m)."""
+    return float(object_size_m(case.category, case.size_m) / np.asarray(mesh.extents).max())
 
-    prior = SIZE_PRIOR[case.category]
-    mean = max(prior[k][0] for k in ("height", "width", "depth") if k in prior)
-    return float(mean / np.asarray(mesh.extents).max())
+
+def region_triangles(mesh, faces, budget: int = REGION_TRIANGLES) -> np.ndarray:
+    """The triangles (F, 3, 3) the contact term measures a region by: the region's own (`faces`, ids of `mesh`) when
+    there are at most `budget`, else the region simplified to at most `budget` triangles by quadric decimation
+    (open3d; the region's vertices merged first, so its surface stays closed), which keeps it within about a
+    millimetre of the original on the objects of a person's hand (a 0.22 m sphere of 20,480 triangles -> 1,280:
+    1.5 mm at most, 0.5 mm on average), with the triangles' winding (outward normals). Degenerate triangles are
+    dropped; decimation that cannot reach the budget (a triangle soup) keeps an even stride of what it left.
+
+    Shape: -> (min(len(faces), budget), 3, 3) float64, in the mesh's frame.
+    Example:
+        >>> sphere = trimesh.creation.icosphere(5)                      # 20,480 triangles
+        >>> region_triangles(sphere, np.arange(20480)).shape
+        (1280, 3, 3)
+    """
+    import open3d as o3d
+    import trimesh
+
+    faces = np.asarray(faces, dtype=np.int64)
+    v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)[faces]
+    if len(f) <= budget:
+        return v[f]
+    sub = trimesh.Trimesh(v, f, process=False)
+    sub.merge_vertices()
+    sub.remove_unreferenced_vertices()
+    o = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.array(sub.vertices, dtype=np.float64)),
+                                  o3d.utility.Vector3iVector(np.array(sub.faces, dtype=np.int32)))
+    d = o.simplify_quadric_decimation(target_number_of_triangles=int(budget))
+    tris = np.asarray(d.vertices, dtype=np.float64)[np.asarray(d.triangles, dtype=np.int64)]
+    area = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+    tris = tris[area > 1e-12 * max(float(area.max(initial=0.0)), 1e-30)]
+    if len(tris) == 0:  # nothing usable came back: an even stride of the region's own triangles
+        tris = v[f]
+    return tris[:: -(-len(tris) // budget)] if len(tris) > budget else tris
 
 
 def _pad(rows: list, dev, dtype=torch.float32, fill=None):
@@ -90,7 +135,7 @@ class Problem:
         for i, case in enumerate(cases):
             mesh, regions = object_mesh(case, object_template(case))
             check_case(case, fingerprint, part_names, regions)
-            base = mesh
+            base, budgeted = mesh, {}  # the regions' budgeted triangles, made once per region of the case
             if cfg.max_edge_frac > 0:  # an even spread of vertices over the surface (the paper's objects: 1k-20k)
                 v, f = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, cfg.max_edge_frac * mesh.extents.max())
                 mesh = trimesh.Trimesh(v, f, process=False)
@@ -103,11 +148,15 @@ class Problem:
                 ids = ids[:: max(1, -(-len(ids) // cfg.part_points))]
                 faces = np.arange(len(base.faces)) if region == ANY_REGION else regions[region]
                 pts, nrm = sample_surface(base, cfg.region_points, seed=0, faces=faces)
-                tris = np.asarray(base.vertices)[np.asarray(base.faces)[faces]]  # (F, 3, 3)
+                if region not in budgeted:
+                    budgeted[region] = region_triangles(base, faces)  # (F, 3, 3), F <= REGION_TRIANGLES
+                tris = budgeted[region]
                 self.pairs.append((self.body_v[i, ids], self.body_n[i, ids], pts, nrm, tris))
                 pair_case.append(i)
         # padding 1 km away from the object: outside every part box, so the learned kinds decode nothing there
         self.obj_v, self.obj_mask = _pad([m.vertices for m in self.meshes], dev, fill=FAR)
+        self.pen_v, self.pen_mask = _pad([m.vertices if len(m.vertices) <= PEN_POINTS else
+                                          sample_surface(m, PEN_POINTS, seed=0)[0] for m in self.meshes], dev, fill=FAR)
         self.obj_samples = torch.as_tensor(np.stack(samples), dtype=dt, device=dev)
         self.prior_object = torch.tensor(priors, dtype=dt, device=dev)
         self.pair_case = torch.tensor(pair_case, dtype=torch.long, device=dev)
@@ -209,5 +258,6 @@ class Problem:
             contact = contact.index_add(0, self.pair_case, c)
             normal = normal.index_add(0, self.pair_case, nc)
         return {"human": human, "object": obj, "obj_body": to_camera(self.obj_v, *rel),
+                "pen_body": to_camera(self.pen_v, *rel),
                 "sil_cam": to_camera(self.sil_v, *obj), "joints_cam": to_camera(self.joints, *human),
                 "contact": contact, "normal": normal}

@@ -294,3 +294,23 @@ def render_camera_view(meshes, camera, points=None, point_colors=None, point_rad
         uv, _, vis = project(kp, cam0, near)
         draw_keypoints(img, uv[0].numpy(), vis[0].numpy(), keypoint_color, 4, keypoint_labels)
     return img
+
+
+# ------------------------------------------------------------------------------------------------ framing
+def scene_view(points, yaw: float = 0.0, pitch: float = 0.0) -> np.ndarray:
+    """World points (Y up) in the view frame of `render_scene` / `render_mesh` at yaw/pitch: x right, y up, z towards
+    the viewer (larger = nearer). Frame a view on what matters from these (their x, y bounds give `center` and
+    `extent`). Shape: (P, 3) -> (P, 3) float64."""
+    return np.asarray(points, dtype=np.float64).reshape(-1, 3) @ _view_rotation(yaw, pitch).T
+
+
+def scene_pixels(points, size: int, yaw: float, pitch: float, extent: float, center) -> np.ndarray:
+    """Pixel coordinates (x right, y down; integer = pixel centre) of world points in `render_scene`'s image of
+    the same size, yaw, pitch, extent and center (given explicitly, as render_scene then frames it), e.g. to draw
+    marks on top of the meshes. Shape: (P, 3) -> (P, 2) float64."""
+    R = _view_rotation(yaw, pitch)
+    xy = scene_view(points, yaw, pitch)[:, :2] - (R @ np.asarray(center, dtype=np.float64).reshape(3))[:2]
+    px = xy * (0.9 * size / extent)
+    px[:, 0] += size / 2
+    px[:, 1] = size / 2 - px[:, 1]
+    return px

@@ -4,10 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+import trimesh
 
 import volsmpl
 from volsmpl.apps.hoi.losses import (body_query, contact_terms, keypoint_term, penetration, relative_similarity,
                                      scale_prior, silhouette_term, to_body_frame, to_camera)
+from volsmpl.apps.hoi.problem import REGION_TRIANGLES, region_triangles
 from volsmpl.geometry.groundtruth import mesh_sdf
 from volsmpl.geometry.rotations import axis_angle_to_matrix
 
@@ -180,3 +182,66 @@ def test_silhouette_zero_on_the_mask_and_positive_off_it():
     assert float(silhouette_term(X, m3, uv, m2, K)) == pytest.approx(0.0, abs=1e-10)
     shifted = X + torch.tensor([0.05, 0.0, 0.0])
     assert float(silhouette_term(shifted, m3, uv, m2, K)) > 0
+
+
+
+def test_a_fine_region_keeps_a_fixed_budget_of_triangles_close_to_its_surface():
+    """A 20,480-triangle sphere (r 0.11 m) is simplified to the budget; its triangles stay within 2 mm of the sphere
+    (analytic), wound outwards; the contact term on them is within 1.5 mm (RMS distance) of the exact distances to
+    the sphere of the same patch; a region within the budget keeps its own triangles."""
+    r = 0.11
+    sphere = trimesh.creation.icosphere(5, radius=r)
+    tris = region_triangles(sphere, np.arange(len(sphere.faces)))
+    assert len(sphere.faces) == 20480 and 0.9 * REGION_TRIANGLES <= len(tris) <= REGION_TRIANGLES
+    assert np.abs(np.linalg.norm(tris, axis=-1) - r).max() < 2e-3
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    assert ((n * tris.mean(axis=1)).sum(-1) > 0).all()
+    small = trimesh.creation.icosphere(3, radius=r)  # 1,280 triangles: as they are
+    assert np.array_equal(region_triangles(small, np.arange(1280)), small.triangles)
+    # part points 0.5-3 cm outside the sphere's top, normals towards its centre; the region's points: face centres
+    g = np.random.default_rng(0)
+    dirs = g.normal(size=(200, 3)) * [0.3, 1.0, 0.3] + [0, 2.0, 0]
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    p = dirs * (r + g.uniform(0.005, 0.03, (200, 1)))
+    pts, nrm = (torch.as_tensor(np.array(x))[None] for x in (sphere.triangles_center, sphere.face_normals))
+    mask = torch.ones(pts.shape[:2], dtype=torch.bool)
+    c, _, _, patch = contact_terms(torch.as_tensor(p)[None], torch.as_tensor(-dirs)[None], pts, nrm, mask, 0.2,
+                                   torch.as_tensor(tris)[None])
+    exact = ((np.linalg.norm(p, axis=1) - r) ** 2)[patch[0].numpy()].mean()
+    assert abs(float(c) ** 0.5 - exact ** 0.5) < 1.5e-3 and int(patch[0].sum()) == 40
+
+
+def test_the_terms_see_a_fixed_budget_whatever_the_mesh(body, tmp_path):
+    """A mesh file of 20,480 triangles in contact as a whole ('any', two pairs): the contact term sees at most the
+    budget of triangles per pair; the ball template's 1,280-triangle 'grasp' keeps exactly its own."""
+    from volsmpl.apps.hoi.case import case_from_dict, object_template
+    from volsmpl.apps.hoi.fit import FitConfig, Problem
+    from volsmpl.body.fingerprint import fingerprint_of_model
+
+    sim = {"scale": 1.0, "rotation": np.diag([1.0, -1.0, -1.0]).tolist(), "translation": [0.0, 0.2, 3.0]}
+    d = {"format": "volsmpl-hoi-case", "version": 1, "name": "fine",
+         "body": {"fingerprint": fingerprint_of_model(body), "betas": [0.0] * 10, "global_orient": [0.0] * 3,
+                  "body_pose": [0.0] * 69, "transl": [0.0] * 3},
+         "object": {"category": "ball", "template_seed": 0},
+         "camera": {"K": [[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]], "image_size": [480, 640]},
+         "keypoints_2d": [[300.0, 200.0, 1.0]] * 24, "silhouette": [[300.0, 250.0]],
+         "contacts": [["right_hand", "grasp"], ["left_hand", "grasp"]], "init": {"human": sim, "object": sim}}
+    vol = volsmpl.attach_volume(body, model="mesh")
+    cfg = FitConfig(max_edge_frac=0.0)
+    tmpl = object_template(case_from_dict(d))
+    own = tmpl.mesh.triangles[tmpl.regions["grasp"]]
+    prob = Problem(case_from_dict(d), body, vol, cfg)
+    assert prob.reg_tri.shape == (2 * len(own), 3, 3) and np.allclose(prob.reg_tri[: len(own)].numpy(), own)
+    trimesh.creation.icosphere(5, radius=0.11).export(tmp_path / "fine.ply")
+    fine = {**d, "object": {"category": "ball", "mesh": "fine.ply"}, "contacts": [["right_hand", "any"]] * 2}
+    prob = Problem(case_from_dict(fine, tmp_path), body, vol, cfg)
+    per_pair = np.bincount(prob.tri_owner.numpy())
+    assert len(per_pair) == 2 and per_pair.max() <= REGION_TRIANGLES and len(prob.reg_tri) == per_pair.sum()
+    assert prob.reg_p.shape[1] == cfg.region_points and prob.part_v.shape[1] <= cfg.part_points
+    # the penetration term: the 10,242 vertices of the fine sphere are read as PEN_POINTS surface samples, each on
+    # the sphere (radius 0.11, independent of the code), while the metrics keep every vertex
+    from volsmpl.apps.hoi.problem import PEN_POINTS
+
+    assert prob.obj_v.shape[1] == 10242 and prob.pen_v.shape[1] == PEN_POINTS < 10242
+    r = prob.pen_v[0].norm(dim=1).numpy()
+    assert np.allclose(r, 0.11, atol=2e-3)
