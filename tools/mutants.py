@@ -396,6 +396,10 @@ MUTANTS = {
     "hoi_size_from_the_templates_only": ("apps/hoi/plausibility.py", "    size = object_size_m(case.category, case.size_m)",
                                          "    size = object_size_m(case.category)",
                                          [T + "apps/hoi/test_make_case.py::test_a_case_of_any_category_with_its_size_fits"]),
+    "hoi_silhouette_one_fillpoly": ("apps/hoi/case_geometry.py",
+                                    "    for tri in np.round(np.clip(uv[faces], -1e5, 1e5) * 16).astype(np.int32):\n        cv2.fillConvexPoly(m, tri, 1, lineType=cv2.LINE_8, shift=4)",
+                                    "    cv2.fillPoly(m, list(np.round(np.clip(uv[faces], -1e5, 1e5) * 16).astype(np.int32)), 1, lineType=cv2.LINE_8, shift=4)",
+                                    [T + "apps/hoi/test_database.py::test_the_silhouette_of_a_closed_mesh_is_its_whole_projection"]),
 }
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["AUTO_BAND", "MIN_Z", "TRANSFER_TOL", "UPRIGHT", "auto_region", "place_from_mask", "project",
-           "raster_pixels", "transfer_region"]
+           "raster_mask", "raster_pixels", "transfer_region"]
 
 AUTO_BAND = 0.02  # metres: `auto` takes the object's triangles within this of its nearest to the part
 TRANSFER_TOL = 0.1  # share of the mesh's largest extent: a template region's triangles further are not moved over
@@ -25,10 +25,10 @@ def project(K: np.ndarray, x: np.ndarray):
     return uv, z
 
 
-def raster_pixels(K: np.ndarray, size, vertices_cam: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """The (u, v) pixels (N, 2) of the projection of a camera-frame mesh: the union of its triangles in front of the
+def raster_mask(K: np.ndarray, size, vertices_cam: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 mask of the projection of a camera-frame mesh: the union of its triangles in front of the
     camera, each filled by OpenCV on its own (one fillPoly of them all keeps only the pixels an odd number of
-    triangles cover: a closed mesh's front and back cancel), row-major order."""
+    triangles cover: a closed mesh's front and back cancel)."""
     import cv2
 
     uv, z = project(K, vertices_cam)
@@ -36,7 +36,12 @@ def raster_pixels(K: np.ndarray, size, vertices_cam: np.ndarray, faces: np.ndarr
     m = np.zeros(tuple(size), np.uint8)
     for tri in np.round(np.clip(uv[faces], -1e5, 1e5) * 16).astype(np.int32):
         cv2.fillConvexPoly(m, tri, 1, lineType=cv2.LINE_8, shift=4)
-    v, u = np.nonzero(m)
+    return m
+
+
+def raster_pixels(K: np.ndarray, size, vertices_cam: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """The (u, v) pixels (N, 2) of `raster_mask`, row-major order."""
+    v, u = np.nonzero(raster_mask(K, size, vertices_cam, faces))
     return np.stack([u, v], axis=1).astype(np.float64)
 
 

@@ -146,3 +146,24 @@ def test_database(tmp_path):
     assert loaded[0].image == f"{loaded[0].name}.png"
     assert db.load_database(tmp_path, split="test")[0].name == db.case_name(1)
     assert db.database_folder(3).name == f"v{db.DB_VERSION}_seed3"
+
+
+def test_the_silhouette_of_a_closed_mesh_is_its_whole_projection():
+    """A box turned obliquely 2 m before the camera: its silhouette is the convex hull of its projected corners
+    (a convex body), filled by OpenCV as one polygon, the reference; each front triangle covers a back one, so one
+    fillPoly of all the triangles would keep only the pixels covered an odd number of times."""
+    import cv2
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    from volsmpl.apps.hoi.case_geometry import project, raster_mask
+
+    box = trimesh.creation.box(extents=(0.4, 0.3, 0.5))
+    v = box.vertices @ Rotation.from_euler("xyz", [25, 35, 10], degrees=True).as_matrix().T + [0.1, -0.05, 2.0]
+    K = np.array([[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]])
+    got = raster_mask(K, (480, 640), v, np.asarray(box.faces))
+    uv, _ = project(K, v)
+    ref = np.zeros((480, 640), np.uint8)
+    cv2.fillConvexPoly(ref, cv2.convexHull(np.round(uv * 16).astype(np.int32)), 1, lineType=cv2.LINE_8, shift=4)
+    inter, union = int((got & ref).sum()), int((got | ref).sum())
+    assert inter / union > 0.99 and ref.sum() > 10000
