@@ -3,14 +3,16 @@
     volsmpl motion --model volsmpl,coap,mesh --scenes 2 --sequences 2 --out out/motion
     volsmpl motion --model volsmpl --scenes all              # 15 rooms x 8 pairs, as the paper
     volsmpl motion tune --model volsmpl,coap,mesh --scenes all --out out/motion   # weights tuned, then tested
-    volsmpl motion --scene room.ply --up z --units mm --start 1.2,0.4 --goal 3.1,2.0 --model volsmpl
+    volsmpl motion --scene room.ply --up z --units mm --start=1200,400 --goal=3100,2000 --model volsmpl
+    volsmpl motion --model volsmpl --scene examples/motion/scene.ply --up z --units mm --start=-1000,0 --goal=1000,200 \
+        --frames 50 --coll-frames 16 --out out/motion_example     # the example (examples/motion/README.md)
 
 Per model (and per collision weight: COAP's sweep w in {0.01, 0.1, 1}, Table D.1) every start/goal pair is walked
 by optimising the walking model (apps/motion/walk.py) against the objective of supp. D.3 (objective.py). The
-collision term's per-frame time and memory are measured once per model on the full 16,384-point cloud (forward,
-and forward + backward); the longest sequence whose forward + backward fits --mem-budget-gb follows from the
-per-frame memory, and a model for which --frames do not fit is evaluated on 16 evenly spaced frames (the authors'
-COAP setting; --coll-frames forces 'all' or a number).
+collision term's per-frame time and memory are measured once per model on the full cloud (a room's 16,384 points,
+a user's corridor; forward, and forward + backward); the longest sequence whose forward + backward fits
+--mem-budget-gb follows from the per-frame memory, and a model for which --frames do not fit is evaluated on 16
+evenly spaced frames (the authors' COAP setting; --coll-frames forces 'all' or a number).
 
 With two rooms or more, every third room tunes the weights and the others test (tuning.py): summary.<model>_test
 is each model over the test rooms at the weight that scored best on the tuning rooms (results.json's `tuning`).
@@ -19,9 +21,17 @@ rooms (a third of the sweep's cost; its rows <model> are the test rooms').
 
 Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<model>, <model>_w<w> and <model>_test, the
 paper's rows, per-sequence records per kind, figures, meta; then `tuning`, `cost` and `paired`: the compared rows' per-sequence differences with bootstrap intervals, stats.py),
-OUT/topdown_<scene>.png and OUT/strip_<scene>_<k>_<model>.png for the first --render sequences. results.json is
+OUT/topdown_<scene>.png (figures.py: axes in metres, cropped to the walks) and OUT/strip_<scene>_<k>_<model>.png
+(the obstacles near the body, the points inside it in red) for the first --render sequences. results.json is
 written after every finished sequence (its `progress` says how many of the planned ones it holds), and each
-sequence's record is kept in OUT/cases/ for --resume.
+sequence's record is kept in OUT/cases/ for --resume. A user's scene (and the generated rooms with --save-meshes)
+also gets each walk's bodies, every frame, in its record (`body`) and a mesh of every 10th frame's body in
+OUT/meshes/<scene>_<k>/<model>_walk.ply, in the input's --units and --up (outputs.py; a reused record's mesh is
+made from the record). On a terminal, bars show the walks of each model and the steps of each walk (--quiet: none).
+
+A user's scene (user_scene.py) is read whole at any size and checked on an overview; its points are taken only in
+the walk's corridor (the box the walk can reach in --frames at the walking model's top speed, widened by the body),
+one per --spacing metres, and its floor level is found there (the densest low slab, printed in one line).
 
 Each sequence record gets a status judged without ground truth (status.py: reached, diverged, goal_missed,
 colliding, worse_than_start) and its reason; results.json's `flagged` lists those not reached (printed after the
@@ -45,6 +55,7 @@ from .options import ALL_SCENES, PAPER_W, check_options, parse_weights, parse_xy
 from .stats import compared_runs, format_pairs, paired_differences
 from .summary import cost_columns, fit_budget, format_table, paper_summary, tuned_rows, tuned_summary, wkey
 from .tuning import choose_weights, split_scenes
+from .user_scene import DEFAULT_SPACING_M
 
 PUBLISHED = "coap_published"   # summary/cost key of COAP as published (--published-cost)
 
@@ -63,7 +74,9 @@ def add_parser(sub):
                       "settings and inputs); the others are computed")
     p.add_argument("--scenes", default="2", help="without --scene: 'all' (15 generated rooms) or a number of rooms")
     p.add_argument("--sequences", type=int, default=8, help="without --scene: start/goal pairs per room (default 8)")
-    p.add_argument("--scene", default=None, help="your own scene: a mesh or point cloud file (instead of rooms)")
+    p.add_argument("--scene", default=None,
+                   help="your own scene instead of rooms: a mesh or point cloud file of any size (see --spacing); "
+                        "its walk's bodies go to results.json and OUT/meshes/ always")
     p.add_argument("--start", default=None, help="with --scene: start floor position A,B (negative: --start=-1,2; the file's horizontal "
                                                  "axes in order, its units)")
     p.add_argument("--goal", default=None, help="with --scene: goal floor position A,B")
@@ -71,8 +84,18 @@ def add_parser(sub):
                    "the floor found in the points)")
     p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="with --scene: the file's units")
     p.add_argument("--floor-y", type=float, default=None,
-                   help="with --scene: floor height in metres after conversion (default: 1st percentile); given, a "
-                        "floor that seems to lie across another axis than --up is a warning, not a refusal")
+                   help="with --scene: floor height in metres after --units, along --up (default: the densest low "
+                        "slab of the points around the walk, printed); given, a floor that seems to lie across "
+                        "another axis than --up is a warning, not a refusal")
+    p.add_argument("--spacing", type=float, default=DEFAULT_SPACING_M,
+                   help=f"with --scene: metres between the scene points taken around the walk (default "
+                        f"{DEFAULT_SPACING_M:g}: a 20 cm object gets ~100 points). The file is read whole at any size, "
+                        f"checked on an overview (size, up axis), and its points taken only in the walk's corridor: "
+                        f"the box the walk can reach in --frames at the walking model's top speed (2.2 m/s) ending "
+                        f"within 0.5 m of the goal, widened by the body's reach (0.6 m) and the collision term's "
+                        f"margin (0.4 m), from 0.1 m under the floor to 2.2 m above it (apps/motion/user_scene.py). "
+                        f"Results: each walk's bodies per frame in results.json and a .ply of every 10th frame's "
+                        f"body under OUT/meshes/, in the file's --units and --up")
     p.add_argument("--frames", type=int, default=80, help="frames per sequence (paper 80-120)")
     p.add_argument("--iters", type=int, default=100,
                    help="Adam steps (paper 100; 0: the straight start walk, not optimised: the cost columns only)")
@@ -117,22 +140,20 @@ def _print_case(scene: str, k: int, label: str, rec: dict, reused: bool = False)
 
 
 def _scenes(args, frames: int, warnings: list) -> list:
-    """The user's scene with its start and goal (checked: size, up axis, floor, obstacles), or the generated rooms."""
-    from .scenes import check_endpoint, check_pair, floor_xz, load_scene, room_scenes
+    """The user's scene: its walk's corridor with its start and goal (checked: size, up axis, reach, floor,
+    obstacles; user_scene.load_user_scene), or the generated rooms."""
+    from .scenes import room_scenes
 
     if args.scene is not None:
-        sc = load_scene(args.scene, up=args.up, units=args.units, floor_y=args.floor_y,
-                        warn=lambda text: warn("motion", text, warnings))
-        s = floor_xz(parse_xy(args.start, "--start"), args.up, args.units)
-        g = floor_xz(parse_xy(args.goal, "--goal"), args.up, args.units)
-        check_pair(sc, s, g, frames, args.units)   # first: a scene in the wrong units shows here (its message says so)
-        s, g = check_endpoint(sc, s, "--start"), check_endpoint(sc, g, "--goal")
-        sc.pairs = [(s, g)]
-        return [sc]
+        from .user_scene import load_user_scene
+
+        return [load_user_scene(args.scene, parse_xy(args.start, "--start"), parse_xy(args.goal, "--goal"), frames,
+                                up=args.up, units=args.units, spacing=args.spacing, floor_y=args.floor_y,
+                                warn=lambda text: warn("motion", text, warnings))]
     return room_scenes(scene_count(args.scenes), args.sequences, frames, first_seed=args.seed)
 
 
-def _walks(model, volume, sc, ks: list, w: float, cfg) -> list:
+def _walks(model, volume, sc, ks: list, w: float, cfg, progress=False) -> list:
     """synthesize_batch on the pairs `ks` of scene `sc`. A walk the harness stops as diverged keeps its last finite
     values (status.judge flags it); an error raised inside a step on NaN/Inf values makes a result without a walk
     (status.failed_metrics) instead of ending the run; in a batch, its pairs are walked again one by one so that
@@ -141,12 +162,12 @@ def _walks(model, volume, sc, ks: list, w: float, cfg) -> list:
     from .synth import synthesize_batch
 
     try:
-        return synthesize_batch(model, volume, sc, [sc.pairs[k] for k in ks], w, cfg)
+        return synthesize_batch(model, volume, sc, [sc.pairs[k] for k in ks], w, cfg, progress=progress)
     except RuntimeError as e:
         if "NaN or Inf" not in str(e):
             raise
         if len(ks) > 1:
-            return [r for k in ks for r in _walks(model, volume, sc, [k], w, cfg)]
+            return [r for k in ks for r in _walks(model, volume, sc, [k], w, cfg, progress)]
         return [{"walk": None, "metrics": failed_metrics(f"the optimisation stopped: {e}")}]
 
 
@@ -166,6 +187,7 @@ def _costs(args, body, model, vols: dict, scenes: list, opt: dict) -> tuple[dict
                       heading0=init["heading0"])
     costs, coll_frames = {}, {}
     for m in opt["models"]:   # the per-frame cost on the full cloud, on the straight walk of the first pair
+        print(f"{m:8s} measuring the collision term's per-frame cost on {len(sc0.points):,} points ...", flush=True)
         costs[m] = measure_cost(vols[m], probe, sc0.points, frames=args.cost_frames, repeats=args.cost_repeats,
                                 device=args.device)
         line = fit_budget(costs[m], budget)
@@ -197,7 +219,10 @@ def _run(args, opt: dict) -> int:
     from volsmpl.report import paper
 
     from volsmpl.apps.motion import walk as W
+    from volsmpl.apps.progress import progress, shown
+
     from .figures import topdown
+    from .outputs import publish, walk_body
     from .status import GOOD, judge
     from .synth import SynthConfig
 
@@ -226,8 +251,13 @@ def _run(args, opt: dict) -> int:
               "encoder_bf16": args.encoder_bf16, "seed": args.seed, "threads": torch.get_num_threads(),
               "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
                            "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"}
+    units, up = (args.units, args.up) if args.scene is not None else ("m", "y")
+    save = args.scene is not None or args.save_meshes   # a user's scene: its bodies and meshes always
+    config.update(save_meshes=save)
     if args.scene is not None:
-        config.update(up=args.up, units=args.units, floor_y=args.floor_y)
+        config.update(up=args.up, units=args.units, floor_y=args.floor_y, spacing=args.spacing,
+                      floor_found_m=round(scenes[0].lift + scenes[0].floor_found, 4),
+                      corridor_points=len(scenes[0].points))
 
     def result(summary: dict, **extra) -> dict:
         """results.json as it stands: the records so far, their flags, the warnings, the progress."""
@@ -250,13 +280,13 @@ def _run(args, opt: dict) -> int:
             cfg = SynthConfig(frames=frames, iters=args.iters, lr=args.lr, residuals=args.residuals,
                               floor_in_loss=args.floor_in_loss, coll_frames=coll_frames[m], device=args.device)
             label = m if len(weights[m]) == 1 else wkey(m, w)
-            names, keys, recs = [], [], {}
+            names, keys, recs, pubs = [], [], {}, {}
             for k, (s, g) in enumerate(sc.pairs):
                 names.append(f"{sc.name}_{k}_{label}")
                 keys.append(store.key({"config": asdict(cfg), "w": w, "model": m, "scene": sc.name, "cloud": cloud,
                                        "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(),
-                                       "batch": args.batch, "body": body.fingerprint,
-                                       "encoder_bf16": args.encoder_bf16}, vols[m]))
+                                       "batch": args.batch, "body": body.fingerprint, "lift": sc.lift,
+                                       "frame": [units, up], "encoder_bf16": args.encoder_bf16}, vols[m]))
                 rec = store.get(names[k], keys[k])
                 if rec is not None:
                     rec.setdefault("case", names[k])
@@ -264,31 +294,37 @@ def _run(args, opt: dict) -> int:
                     recs[k] = rec
             for k in sorted(recs):
                 _print_case(sc.name, k, label, recs[k], reused=True)
-                records[(m, w)].append(recs[k])
-                cases.setdefault(m, []).append(recs[k])
+                pubs[k] = publish(recs[k], out, f"{sc.name}_{k}", label, body, save)   # meshes from the record
+                records[(m, w)].append(pubs[k])
+                cases.setdefault(m, []).append(pubs[k])
             todo = [k for k in range(len(sc.pairs)) if k not in recs]
-            for i in range(0, len(todo), args.batch):   # the pairs not stored yet, up to --batch at a time
-                ks = todo[i:i + args.batch]
-                for k, r in zip(ks, _walks(model, vols[m], sc, ks, w, cfg)):
+            batches = [todo[i:i + args.batch] for i in range(0, len(todo), args.batch)]
+            unit = "walk" if args.batch == 1 else "batch"
+            for ks in progress(batches, f"{sc.name} {label}", quiet=args.quiet, unit=unit):   # the pairs not stored
+                for k, r in zip(ks, _walks(model, vols[m], sc, ks, w, cfg, shown(args.quiet))):
                     s, g = sc.pairs[k]
                     recs[k] = {"case": names[k], "scene": sc.name, "sequence": k, "model": m, "w": w,
                                "start": np.asarray(s).tolist(), "goal": np.asarray(g).tolist(), "frames": frames,
                                "collision_frames": coll_frames[m], "metrics": r["metrics"]}
                     recs[k]["status"], recs[k]["status_why"] = judge(recs[k])
+                    if r["walk"] is not None:
+                        recs[k]["body"] = walk_body(r["walk"], sc.lift, units, up)
                     if k < args.render and r["walk"] is not None:
-                        W.render_strip(r["walk"], body.faces, out / f"strip_{names[k]}.png", every=10)
+                        W.render_strip(r["walk"], body.faces, out / f"strip_{names[k]}.png", every=10,
+                                       scene_points=sc.points, scene_floor=sc.floor)
                         figures[f"strip_{names[k]}"] = f"strip_{names[k]}.png"
                     store.put(names[k], keys[k], recs[k])
                     _print_case(sc.name, k, label, recs[k])
-                    records[(m, w)].append(recs[k])
-                    cases.setdefault(m, []).append(recs[k])
+                    pubs[k] = publish(recs[k], out, f"{sc.name}_{k}", label, body, save)
+                    records[(m, w)].append(pubs[k])
+                    cases.setdefault(m, []).append(pubs[k])
                     save_partial()
             n = len(sc.pairs)   # this block's records, in sequence order (the last n of their lists)
-            records[(m, w)][-n:] = cases[m][-n:] = [recs[k] for k in range(n)]
+            records[(m, w)][-n:] = cases[m][-n:] = [pubs[k] for k in range(n)]
             for k in range(n):
                 if recs[k]["metrics"].get("pelvis_xz"):
                     paths.setdefault(label, []).append(np.asarray(recs[k]["metrics"]["pelvis_xz"]))
-        topdown(sc, paths, sc.pairs, path=out / f"topdown_{sc.name}.png")
+        topdown(sc, paths, sc.pairs, path=out / f"topdown_{sc.name}.png", up=up)
         figures[f"topdown_{sc.name}"] = f"topdown_{sc.name}.png"
 
     if protocol == "tuned":   # the sweep on the tuning rooms, then each model's chosen weight on the others

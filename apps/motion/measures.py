@@ -2,7 +2,7 @@
 
 What it holds: `pose_prior` (quadratic prior on the pose residuals), `jerk` (DartControl's jerk term, weighted by
 `JERK_WEIGHT` in the objective), `foot_skate` (cm per frame of the contact feet), `render_strip` (a side-view strip of
-frames with the floor dots and contact feet) and `check_tensor` (the shape/dtype/finiteness checks of tensors given to
+frames with the floor dots, contact feet, the obstacles near the body and the scene points inside it) and `check_tensor` (the shape/dtype/finiteness checks of tensors given to
 the walking model and to these measures).
 
     loss = jerk(walk.joints).mean() + pose_prior(residual).mean()
@@ -99,40 +99,87 @@ def foot_skate(joints: torch.Tensor, contacts: torch.Tensor, foot_joints: tuple[
 
 
 # ------------------------------------------------------------------------------------------------ pictures
+NEAR_M = 0.15   # scene points this close to the body are drawn in a strip's tile
+
+
+def _near_and_inside(V: np.ndarray, faces: np.ndarray, points: np.ndarray, floor: np.ndarray, near: float):
+    """Of the scene points, those above the floor within `near` of one frame's body (vertices V), and those inside
+    the body (exact signed distance to its mesh < 0, floor points included) with their depths (m)."""
+    from scipy.spatial import cKDTree
+    from volsmpl.geometry.point_mesh_distance import mesh_signed_distance
+
+    lo, hi = V.min(0) - near, V.max(0) + near
+    box = ((points >= lo) & (points <= hi)).all(1)
+    if not box.any():
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+    cand, cfloor = points[box], floor[box]
+    d, _ = cKDTree(V).query(cand, k=1)
+    close = d < near
+    if not close.any():
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+    sd = mesh_signed_distance(torch.as_tensor(V), torch.as_tensor(faces).long(),
+                              torch.as_tensor(cand[close])).numpy()
+    inside = cand[close][sd < 0]
+    return cand[close & ~cfloor], inside, -sd[sd < 0]
+
+
 def render_strip(walk, faces, path=None, every: int = 10, sequence: int = 0, size: int = 360,
-                 yaw: float = 90.0, pitch: float = 10.0, extent: float = 2.2):
+                 yaw: float | None = None, pitch: float = 10.0, extent: float = 2.2, scene_points=None,
+                 scene_floor=None, near: float = NEAR_M):
     """Side view of every `every`-th frame of one sequence, side by side (one tile per frame, the camera following
-    the pelvis, one scale), with a floor grid of dots every 10 cm (fixed in the world, so a sliding foot shows as a
-    foot moving against the dots) and the contact feet's balls in red.
+    the pelvis, one scale, looking across the walk's overall direction unless `yaw` is given), with a floor grid of
+    dots every 10 cm (fixed in the world, so a sliding foot shows as a foot moving against the dots) and the
+    contact feet's balls in green. With `scene_points` ((N, 3), Y up, floor at y = 0; `scene_floor` (N,) bool: the
+    floor points): the obstacle points within `near` metres of the body as blue-grey dots, and the scene points
+    inside the body (exact mesh test) in red, drawn over the body so that a penetration always shows; each tile
+    names the frame, the gait phase and how many points are inside, how deep.
 
     Shape: -> (size, n * size, 3) uint8 RGB; written as PNG where `path` is given.
     Example:
-        >>> render_strip(model(*straight_controls(1, 12)), body.faces, "walk_strip.png")
+        >>> render_strip(model(*straight_controls(1, 12)), body.faces, "walk_strip.png", scene_points=sc.points,
+        ...              scene_floor=sc.floor)
     """
     import cv2
 
-    from volsmpl.viz.render import render_scene, save_png
+    from volsmpl.viz.render import render_scene, save_png, scene_pixels
     if every < 1:
         raise ValueError(f"every must be >= 1, got {every}")
     V = walk.vertices[sequence].detach().cpu().double().numpy()
     Jt = walk.joints[sequence].detach().cpu().double().numpy()
     C = walk.contacts[sequence].detach().cpu().numpy()
     faces = np.asarray(faces)
+    if yaw is None:   # across the walk: the camera on the walk's left of its start-to-end direction
+        d = Jt[-1, 0, [0, 2]] - Jt[0, 0, [0, 2]]
+        yaw = float(np.degrees(np.arctan2(d[0], d[1]))) + 90.0 if np.linalg.norm(d) > 1e-6 else 90.0
+    P = None if scene_points is None else np.asarray(scene_points, dtype=np.float64).reshape(-1, 3)
+    PF = (np.zeros(0 if P is None else len(P), bool) if scene_floor is None
+          else np.asarray(scene_floor, bool).reshape(-1))
     lo, hi = Jt[:, 0, [0, 2]].min(0) - 1.2, Jt[:, 0, [0, 2]].max(0) + 1.2
     gx, gz = np.meshgrid(np.arange(lo[0], hi[0], 0.1), np.arange(lo[1], hi[1], 0.1))
     grid = np.stack([gx.ravel(), np.zeros(gx.size), gz.ravel()], 1)
-    near = np.linalg.norm(grid[:, None, [0, 2]] - Jt[None, :, 0, [0, 2]], axis=-1).min(1) < 0.3
-    grid = grid[near]                                    # a band of floor dots along the path
+    close = np.linalg.norm(grid[:, None, [0, 2]] - Jt[None, :, 0, [0, 2]], axis=-1).min(1) < 0.3
+    grid = grid[close]                                   # a band of floor dots along the path
     tiles = []
     for t in range(0, V.shape[0], every):
         feet = Jt[t, list(FOOT_JOINTS)][C[t]]
-        pts = np.concatenate([grid, feet]) if len(feet) else grid
-        cols = np.concatenate([np.tile((0.55, 0.55, 0.55), (len(grid), 1)), np.tile((0.9, 0.1, 0.1), (len(feet), 1))])
+        obst = inside = np.zeros((0, 3))
+        depth = np.zeros(0)
+        if P is not None and len(P):
+            obst, inside, depth = _near_and_inside(V[t], faces, P, PF, near)
+        pts = np.concatenate([grid, obst, feet])
+        cols = np.concatenate([np.tile((0.6, 0.6, 0.6), (len(grid), 1)), np.tile((0.25, 0.35, 0.6), (len(obst), 1)),
+                               np.tile((0.1, 0.6, 0.15), (len(feet), 1))])
         centre = np.array([Jt[t, 0, 0], 0.85, Jt[t, 0, 2]])
         img = render_scene([(V[t], faces, (0.85, 0.65, 0.5))], size=size, yaw=yaw, pitch=pitch, extent=extent,
-                           center=centre, points=pts, point_colors=cols, point_radius=2, max_edge=None)
+                           center=centre, points=pts, point_colors=cols, point_radius=1, max_edge=None)
+        for c, r in np.round(scene_pixels(inside, size, yaw, pitch, extent, centre)).astype(int):   # over the body
+            cv2.circle(img, (int(c), int(r)), 3, (220, 0, 0), -1, cv2.LINE_AA)
         cv2.putText(img, f"t={t} ph={walk.phase[sequence, t].item():.2f}", (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
                     (20, 20, 20), 1, cv2.LINE_AA)
+        if P is not None:
+            text = (f"{len(inside)} pts inside, {100 * depth.max():.1f} cm deep" if len(inside) else "no point inside")
+            cv2.putText(img, text, (6, 36), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (150, 0, 0) if len(inside) else
+                        (60, 60, 60), 1, cv2.LINE_AA)
         tiles.append(img)
     strip = np.concatenate(tiles, axis=1)
     if path is not None:

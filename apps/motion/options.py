@@ -13,16 +13,17 @@ from volsmpl.apps.checks import applies, number, warn
 
 PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
 ALL_SCENES = 15
+SPARSE_SPACING_M = 0.1   # --spacing above this is warned about (a 20 cm object gets fewer than 24 points)
 
 #: what every mode reads: the models and their cost, the walk's optimisation, the output
 _WALK = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device", "resume", "render", "frames", "iters",
          "lr", "w", "coll_frames", "mem_budget_gb", "residuals", "floor_in_loss", "cost_frames", "cost_repeats",
-         "published_cost", "encoder_bf16"}
+         "published_cost", "encoder_bf16", "save_meshes"}
 _ROOMS = _WALK | {"scenes", "sequences", "seed", "batch"}
 #: mode -> the options (argparse dests) it reads
 USES = {"motion without --scene": _ROOMS,
         "motion tune": _ROOMS,
-        "motion --scene": _WALK | {"scene", "start", "goal", "up", "units", "floor_y"}}
+        "motion --scene": _WALK | {"scene", "start", "goal", "up", "units", "floor_y", "spacing"}}
 
 
 def mode_of(args) -> str:
@@ -100,6 +101,7 @@ def check_options(args) -> dict:
     from volsmpl.volume.models import model_kind
 
     from .synth import check_frames
+    from .user_scene import DEFAULT_SPACING_M
 
     mode = mode_of(args)
     applies(args, mode, USES[mode])
@@ -117,6 +119,12 @@ def check_options(args) -> dict:
         parse_xy(args.start, "--start"), parse_xy(args.goal, "--goal")
         if args.floor_y is not None:
             number(args.floor_y, "--floor-y", what="the floor's height in metres after --units")
+        spacing = number(args.spacing, "--spacing", lo=0, lo_open=True,
+                         what="metres between the scene points taken around the walk")
+        if spacing > SPARSE_SPACING_M:
+            warn("motion", f"--spacing {spacing:g}: a 20 cm object gets about {0.24 / spacing ** 2:.0f} points at "
+                           f"{spacing:g} m apart, and the walk may pass through it unseen; the default is "
+                           f"{DEFAULT_SPACING_M:g}", warnings)
     else:
         n = scene_count(args.scenes)
         number(args.sequences, "--sequences", lo=1, what="start/goal pairs per room")

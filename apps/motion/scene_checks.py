@@ -20,6 +20,7 @@ slab and at most 15% in a wall's, a score ratio (below) of about 5; a narrow roo
 floor, or a corridor, comes out unclear (a warning, never a refusal).
 
     pts = read_points("scan.ply", "--scene", units="mm")   # (N, 3) metres, the file's own axes
+    scan = open_scene_file("scan.ply", "--scene", units="mm")   # a Scan read once; scan.overview(n) for the checks
     doubts = check_scene(pts, "scan.ply", up="z", units="mm", floor_y=None, warn=print)
 """
 from __future__ import annotations
@@ -31,8 +32,8 @@ from pathlib import Path
 import numpy as np
 from volsmpl.scene.floor import FLOOR_BAND_M, estimate_floor
 
-__all__ = ["FORMATS", "MAX_SPAN_M", "MIN_SPAN_M", "LARGE_SPAN_M", "LOW_HEIGHT_M", "read_points", "span", "units_fix",
-           "check_scene"]
+__all__ = ["FORMATS", "MAX_SPAN_M", "MIN_SPAN_M", "LARGE_SPAN_M", "LOW_HEIGHT_M", "read_points", "open_scene_file",
+           "span", "units_fix", "check_scene"]
 
 FORMATS = ("a mesh or point cloud (ply, obj, off, stl, glb, xyz, ...: what trimesh reads) or an array of x y z "
            "points (.npy, .npz with 'points', .txt, .csv)")
@@ -49,14 +50,9 @@ def _fail(path, option: str, what: str) -> ValueError:
     return ValueError(f"{option} {path}: {what}; give {FORMATS}")
 
 
-def read_points(path, option: str = "--scene", units: str = "m", n_surface: int = 65536, seed: int = 0) -> np.ndarray:
-    """The points of a user's scene file in metres, in the file's own axes (volsmpl.scene.scan.read_scan), with
-    one line naming the file and the formats read for a missing file, a folder, an empty or unreadable file, a
-    pickled .npy or a file no reader takes. Shape: -> (N, 3) float64."""
-    import zipfile
-
-    from volsmpl.scene.scan import read_scan
-
+def _check_file(path, option: str) -> Path:
+    """The path of a user's scene file; one line naming the file and the formats read for a missing file, a folder,
+    an empty or unreadable file."""
     p = Path(path)
     if p.is_dir():
         raise _fail(path, option, "is a folder, not a file")
@@ -68,15 +64,42 @@ def read_points(path, option: str = "--scene", units: str = "m", n_surface: int 
         raise _fail(path, option, "is empty (0 bytes)")
     if not os.access(p, os.R_OK):
         raise _fail(path, option, "cannot be read (permission denied)")
+    return p
+
+
+def _read(read, path, option: str):
+    """read() (a reader of volsmpl.scene.scan) with its errors as one line naming the file (and the formats read
+    where no reader takes it)."""
+    import zipfile
+
     try:
-        return read_scan(p, units, n_surface, seed, option=option)
+        return read()
     except ValueError as e:
         msg = " ".join(str(e).split())
-        if msg.startswith(f"{option} "):   # read_scan named the file and the fix, or the reader's error
+        if msg.startswith(f"{option} "):   # the reader named the file and the fix, or the reader's error
             raise ValueError(msg if "cannot read it (" not in msg else f"{msg}; give {FORMATS}") from None
         raise ValueError(f"{option} {path}: {msg}") from None   # check_cloud: empty, NaN, wrong shape
     except (OSError, EOFError, KeyError, IndexError, UnicodeDecodeError, zipfile.BadZipFile) as e:
         raise _fail(path, option, f"cannot read it ({type(e).__name__}: {' '.join(str(e).split())[:120]})") from None
+
+
+def read_points(path, option: str = "--scene", units: str = "m", n_surface: int = 65536, seed: int = 0) -> np.ndarray:
+    """The points of a user's scene file in metres, in the file's own axes (volsmpl.scene.scan.read_scan), with
+    one line naming the file and the formats read for a missing file, a folder, an empty or unreadable file, a
+    pickled .npy or a file no reader takes. Shape: -> (N, 3) float64."""
+    from volsmpl.scene.scan import read_scan
+
+    p = _check_file(path, option)
+    return _read(lambda: read_scan(p, units, n_surface, seed, option=option), path, option)
+
+
+def open_scene_file(path, option: str = "--scene", units: str = "m"):
+    """A user's scene file read once as a volsmpl.scene.scan.Scan (metres, the file's own axes: a mesh keeps its
+    triangles, a cloud its points), refused in one line as `read_points` refuses it."""
+    from volsmpl.scene.scan import open_scan
+
+    p = _check_file(path, option)
+    return _read(lambda: open_scan(p, units, option=option), path, option)
 
 
 def span(points: np.ndarray) -> np.ndarray:

@@ -1,10 +1,13 @@
 """Scenes and start/goal pairs of the motion app: generated rooms (volsmpl.scene) and a user's own scan.
 
-A `MotionScene` is a point cloud (16,384 farthest-point samples of the surfaces, floor included; Y up, metres,
-floor at `floor_y`) with a name, and its start/goal pairs (x, z floor positions). Generated rooms
-(`room_scene(seed)`) come with the room itself (for footprints in plots); `load_scene(path, ...)` reads a mesh or a
-point cloud in any format trimesh reads (ply, obj, off, stl, glb, xyz...) or a .npy/.npz/.txt array of points,
-converts up-axis and units, and samples it to 16,384 points; its size and up axis are checked right after reading
+A `MotionScene` is a point cloud (a generated room: 16,384 farthest-point samples of the surfaces, floor
+included; a user's scan: the points of its walk's corridor; Y up, metres, floor at `floor_y`) with a name, and its
+start/goal pairs (x, z floor positions). Generated rooms (`room_scene(seed)`) come with the room itself (for
+footprints in plots). `volsmpl motion --scene` takes a user's scan through user_scene.load_user_scene (the walk's
+corridor at a spacing in metres, any size of scene). `load_scene(path, ...)` here reads a small scene whole: a
+mesh or a point cloud in any format trimesh reads (ply, obj, off, stl, glb, xyz...) or a .npy/.npz/.txt array of
+points, converts up-axis and units, and samples it to 16,384 points (about 1 m apart over a 124 m temple: for
+anything larger than a room, load_user_scene); its size and up axis are checked right after reading
 (scene_checks.py: refused when they cannot be right, warned about when unusual) and its name is made file-safe
 (volsmpl.apps.checks.safe_name: `my room.ply` -> 'my_room-<hash>').
 
@@ -34,7 +37,9 @@ FLOOR_REACH = 0.3     # metres: a floor point must lie this close to a start or 
 class MotionScene:
     """A scene cloud and its start/goal pairs. points (N, 3) float32, floor (N,) bool (floor points), pairs:
     list of (start (2,), goal (2,)) floor positions (x, z); doubts: what looked odd about a user's scene
-    (scene_checks.check_scene), repeated by the refusals of its start and goal."""
+    (scene_checks.check_scene), repeated by the refusals of its start and goal; floor_found: the floor level found
+    in a user's scan, in this cloud's heights (None: the cloud's 1st height percentile stands for it); lift: the
+    height subtracted from the scan's points to put the floor at y = 0 (added back for the outputs)."""
 
     name: str
     points: np.ndarray
@@ -43,6 +48,8 @@ class MotionScene:
     room: object = None
     pairs: list = field(default_factory=list)
     doubts: list = field(default_factory=list)
+    floor_found: float | None = None
+    lift: float = 0.0
 
 
 def _likely(scene: MotionScene) -> str:
@@ -60,9 +67,11 @@ def check_endpoint(scene: MotionScene, xz, which: str) -> np.ndarray:
     P = scene.points
     d = np.linalg.norm(P[:, [0, 2]] - q, axis=1)
     if not (scene.floor & (d < FLOOR_REACH)).any():
-        low = float(np.percentile(P[:, 1], 1))
-        level = (f" (the floor level lies {scene.floor_y - low:.2f} m above the scene's lowest points: check "
-                 f"--floor-y)" if abs(scene.floor_y - low) > FLOOR_REACH else "")
+        found = getattr(scene, "floor_found", None)
+        low = float(np.percentile(P[:, 1], 1)) if found is None else float(found)
+        gap = scene.floor_y - low
+        level = (f" (the floor level lies {abs(gap):.2f} m {'above' if gap > 0 else 'below'} the scene's lowest "
+                 f"points: check --floor-y)" if abs(gap) > FLOOR_REACH else "")
         raise ValueError(f"{which} ({q[0]:.2f}, {q[1]:.2f}) is off the floor of scene '{scene.name}': no floor point "
                          f"within {FLOOR_REACH} m; pick a position on the floor{level}{_likely(scene)}")
     h = P[:, 1] - scene.floor_y

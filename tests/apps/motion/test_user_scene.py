@@ -202,6 +202,8 @@ def test_cli_refuses_options_a_mode_does_not_read_and_bad_numbers_before_any_wor
              (["--w", "mesh=1", "--w", "mesh=2"], "--w mesh=... is given twice"),
              (["--w", "mesh=-1"], "finite and >= 0"),
              (scene + ["--floor-y", "nan"], "--floor-y nan: give a finite number"),
+             (scene + ["--spacing", "0"], "--spacing 0: give a finite number > 0"),
+             (["--spacing", "0.03"], "--spacing does not apply to `volsmpl motion without --scene`"),
              (["--scene", str(tmp_path / "none.ply"), "--start", "0,0", "--goal", "1,1"], "none.ply: no such file")]
     for extra, msg in cases:
         assert main(["motion", "--model", "mesh", "--out", str(tmp_path / "o")] + extra) == 2, extra
