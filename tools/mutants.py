@@ -400,6 +400,19 @@ MUTANTS = {
                                     "    for tri in np.round(np.clip(uv[faces], -1e5, 1e5) * 16).astype(np.int32):\n        cv2.fillConvexPoly(m, tri, 1, lineType=cv2.LINE_8, shift=4)",
                                     "    cv2.fillPoly(m, list(np.round(np.clip(uv[faces], -1e5, 1e5) * 16).astype(np.int32)), 1, lineType=cv2.LINE_8, shift=4)",
                                     [T + "apps/hoi/test_database.py::test_the_silhouette_of_a_closed_mesh_is_its_whole_projection"]),
+    "motion_corridor_without_the_body": ("apps/motion/user_scene.py", "    pad = BODY_REACH_M + AABB_MARGIN\n", "    pad = 0.0\n",
+                                         [T + "apps/motion/test_scan_region.py::test_the_corridor_is_the_reach_ellipse_box_widened_by_the_body"]),
+    "motion_floor_at_a_low_percentile": ("apps/motion/user_scene.py", "found = floor_level(column[:, 1], low_share=FLOOR_LOW_SHARE)",
+                                         "found = float(np.percentile(column[:, 1], 1))",
+                                         [T + "apps/motion/test_scan_region.py::test_the_floor_is_found_among_stray_points_below_it"]),
+    "motion_bodies_below_the_floor": ("apps/motion/outputs.py", '"transl": _r(walk.transl[0] + up_shift)', '"transl": _r(walk.transl[0])',
+                                      [T + "apps/motion/test_examples.py::test_the_readme_command_gives_bodies_meshes_and_figures"]),
+    "motion_resumed_meshes_stale": ("apps/motion/cli.py",
+                                    'pubs[k] = publish(recs[k], out, f"{sc.name}_{k}", label, body, save)   # meshes from the record',
+                                    "pubs[k] = recs[k]",
+                                    [T + "apps/motion/test_scan_region.py::test_generated_rooms_write_meshes_only_with_save_meshes_and_from_the_record"]),
+    "motion_strip_hides_penetration": ("apps/motion/measures.py", "cv2.circle(img, (int(c), int(r)), 3, (220, 0, 0), -1, cv2.LINE_AA)", "None",
+                                       [T + "apps/motion/test_figures.py::test_the_strip_shows_the_points_inside_the_body_in_red"]),
 }
 
 
