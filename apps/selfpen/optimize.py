@@ -329,7 +329,8 @@ def summarize(results: list[RepairResult]) -> dict:
     of repair, sum over those cases of (before - after) over the sum of their loop times. max_change_deg: the mean
     over the cases of each case's largest joint change; largest_change_deg its largest; largest_still_change_deg: the
     largest change of a joint the contact does not turn; limit_violations: joint angles the repairs moved beyond
-    their limits (all cases)."""
+    their limits (all cases); collidable_left_cases: the cases the exact counter still finds pairs of collidable parts
+    in after the repair."""
     active = [r for r in results if r.status != "no_intersection"]
     steps = [t for r in active for t in r.step_ms]
     mean = lambda xs: float(np.mean(xs)) if len(xs) else float("nan")
@@ -353,6 +354,7 @@ def summarize(results: list[RepairResult]) -> dict:
         "largest_change_deg": max([r.max_change_deg for r in active], default=0.0),
         "largest_still_change_deg": max([r.still_change_deg for r in active], default=0.0),
         "limit_violations": sum(len(r.limits_after) for r in active),
+        "collidable_left_cases": sum(bool(r.collidable_after) for r in active),
         "removed_per_s": (sum(r.collisions_before - r.collisions_after for r in active) / total
                           if (total := sum(r.total_s for r in active)) > 0 else float("nan")),
     }
