@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 MEAN_KEYS = ("step_ms", "memory_gb", "iterations", "total_s", "collisions_after", "collidable_after",
-             "pose_change_deg", "removed_per_s")
+             "pose_change_deg", "max_change_deg", "removed_per_s")
 
 
 def gather(folders: list, command: str) -> dict:

@@ -253,12 +253,17 @@ def selfpen_section(ctx) -> list[str]:
     seed = get_path(d, "config.seed")
     for m, s in (d.get("summary") or {}).items():
         groups.append((f"{m}, seed {seed if seed is not None else 'not recorded'}", m, s))
-    extra = ["collisions_before", "collidable_before", "collidable_after", "pose_change_deg", "removed_per_s"]
+    extra = ["collisions_before", "collidable_before", "collidable_after", "collidable_left_cases", "pose_change_deg",
+             "max_change_deg", "largest_change_deg", "largest_still_change_deg", "limit_violations", "removed_per_s"]
     out = summary_table("6", groups, key_map={"collisions": "collisions_after"}, extra=extra)
     kinds = sorted({s.get("memory_kind") for _, _, s in groups if s.get("memory_kind")})
     preset = get_path(d, "config.preset") or d.get("preset", "not recorded")   # the envelope's config, or top level
     out += ["", f"Ours: preset {preset}, memory {', '.join(kinds) or 'not recorded'}; "
-                "triangle collisions after repair (pose-induced pairs; the paper counts PROX meshes)."]
+                "triangle collisions after repair (pose-induced pairs; the paper counts PROX meshes). "
+                "pose_change_deg: the mean joint change; max_change_deg: the mean of each case's largest, "
+                "largest_change_deg the largest of all; largest_still_change_deg: the largest change of a joint the "
+                "contact does not turn (held by --hold); limit_violations: joint angles the repairs moved beyond "
+                "their anatomical limits; collidable_left_cases: cases with collidable pairs left."]
     out += paper_mismatch(d, "6")
     if isinstance(tune, dict):
         best = tune.get("best") or {}
