@@ -212,9 +212,10 @@ def fit_cases(cases: list, body, volume, cfg: FitConfig = FitConfig(), problem: 
     return results
 
 
-def fit_case(case: HoiCase, body, volume, cfg: FitConfig = FitConfig(), problem: Problem | None = None) -> FitResult:
+def fit_case(case: HoiCase, body, volume, cfg: FitConfig = FitConfig(), problem: Problem | None = None,
+             progress: bool | None = None) -> FitResult:
     """`fit_cases` of one case."""
-    return fit_cases([case], body, volume, cfg, problem)[0]
+    return fit_cases([case], body, volume, cfg, problem, progress=progress)[0]
 
 
 def _within(a: torch.Tensor, b: torch.Tensor, radius: float):

@@ -26,6 +26,7 @@ def run_tune(args, cases: list) -> int:
     """`volsmpl hoi tune`: each --grid value as both image weights, every kind of --model fitting `cases` (the
     tuning half's selection) at the other settings given; writes OUT/tune.json after every value."""
     import volsmpl
+    from volsmpl.apps.progress import progress, steps_bar
     from volsmpl.apps.table import check_common, checkpoint_names, volumes, write_results
 
     from .console import case_line
@@ -47,8 +48,8 @@ def run_tune(args, cases: list) -> int:
         cfg = replace(base, w_keypoints=w, w_silhouette=w)
         res = {m: [] for m in models}
         for m in models:
-            for c in cases:
-                r = fit_case(c, body, vols[m], cfg, Problem(c, body, vols[m], cfg))
+            for c in progress(cases, f"hoi tune w_image {w:g} {m}", quiet=args.quiet):
+                r = fit_case(c, body, vols[m], cfg, Problem(c, body, vols[m], cfg), progress=steps_bar(args.quiet))
                 res[m].append(r)
                 print(f"w_image {w:g} {case_line(c.name, m, r)}", flush=True)
         row = {"w_image": w, "score": float(np.mean([score(rs) for rs in res.values()])),

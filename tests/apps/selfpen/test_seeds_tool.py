@@ -26,8 +26,8 @@ def test_means_and_ratio(tmp_path):
     assert res["config"] == {"lr": 0.01} and list(res["per_seed"]) == ["0", "1"]
     assert res["mean_over_seeds"]["volsmpl"]["step_ms"] == pytest.approx(2.0)      # (1 + 3) / 2
     assert res["mean_over_seeds"]["coap"]["removed_per_s"] == pytest.approx(4.0)   # (2 + 6) / 2
-    # removed_per_s is the 8th column: volsmpl 8 * scale against coap 2 * scale
-    assert res["removed_per_s_ratio_volsmpl_over_coap"] == {"0": pytest.approx(4.0), "1": pytest.approx(4.0)}
+    # removed_per_s is the 9th column: volsmpl 9 * scale against coap 2 * scale
+    assert res["removed_per_s_ratio_volsmpl_over_coap"] == {"0": pytest.approx(4.5), "1": pytest.approx(4.5)}
 
 
 def test_refuses_runs_with_other_settings(tmp_path, capsys):
