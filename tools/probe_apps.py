@@ -266,10 +266,14 @@ def _failed():
         note="collision 1 % -> 14 % at 187d9ff")
     add(c, "hoi", "lr100_exploding", f"{FIT} --lr 100 --iters 30", "flag:--lr|diverg", ["hoi"])
     add(c, "hoi", "init_object_3m_off", f"fit --case {H}/case_init_obj_3m.json --iters 30", "flag:init|far", ["hoi"])
+    # every joint free and no limits (--hold off --limits off): with them the same steps repair these bodies
+    # (forearm: 2331 -> 1517 pairs, 286 -> 8 collidable); without them they make the bodies worse, to be flagged
     add(c, "selfpen", "betas-5_lr1_forearm", f"--case-file {S}/extreme_neg.json --cases forearm_neg --lr 1 --max-step 0 "
-        "--max-iters 30", "flag", ["selfpen"], note="collisions 2331 -> 2896, status resolved at 187d9ff")
+        "--hold off --limits off --max-iters 30", "flag", ["selfpen"],
+        note="collisions 2331 -> 2896, status resolved at 187d9ff")
     add(c, "selfpen", "betas-5_lr1_seated", f"--case-file {S}/extreme_neg.json --cases seated_neg --lr 1 --max-step 0 "
-        "--max-iters 30", "flag", ["selfpen"], note="collisions 3451 -> 8263, status stalled at 187d9ff")
+        "--hold off --limits off --max-iters 30", "flag", ["selfpen"],
+        note="collisions 3451 -> 8263, status stalled at 187d9ff")
     add(c, "selfpen", "betas+5_unrepaired", f"--case-file {S}/extreme_pos.json --cases forearm_pos --max-iters 30",
         "flag", ["selfpen"], note="no_volume_points: 176 collisions left unchanged at 187d9ff")
     add(c, "motion", "goal_behind_wall", f"--scene {M}/room_wall.ply --start 1.8,2.5 --goal 4.2,2.5 --iters 8",
