@@ -9,23 +9,10 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from hoi_cases import ball_case
 from volsmpl.apps.hoi.case import case_from_dict
 from volsmpl.cli import main as cli_main
 from volsmpl.scene.objects import make_object
-
-
-def _ball_case_builder():
-    """test_fit.py's hand-made ball case (one builder for every file)."""
-    import importlib.util
-    from pathlib import Path
-
-    spec = importlib.util.spec_from_file_location("hoi_test_fit", Path(__file__).with_name("test_fit.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.ball_case
-
-
-ball_case = _ball_case_builder()
 
 
 def _place(sim: dict, x: np.ndarray) -> np.ndarray:

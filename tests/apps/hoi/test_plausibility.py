@@ -7,25 +7,11 @@ import json
 import numpy as np
 import pytest
 import torch
-
+from hoi_cases import ball_case
 from volsmpl.apps.hoi.case import case_from_dict, object_mesh
 from volsmpl.apps.hoi.plausibility import check_case_data, judge_fit
 from volsmpl.cli import main as cli_main
 from volsmpl.scene.objects import make_object
-
-
-def _ball_case_builder():
-    """test_fit.py's hand-made ball case (one builder for both files)."""
-    import importlib.util
-    from pathlib import Path
-
-    spec = importlib.util.spec_from_file_location("hoi_test_fit", Path(__file__).with_name("test_fit.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.ball_case
-
-
-ball_case = _ball_case_builder()
 
 
 def _checked(body, tmp_path, d, scale=1.0, shift=(0.0, 0.0, 0.0), units="m"):
