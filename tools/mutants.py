@@ -413,6 +413,8 @@ MUTANTS = {
                                     [T + "apps/motion/test_scan_region.py::test_generated_rooms_write_meshes_only_with_save_meshes_and_from_the_record"]),
     "motion_strip_hides_penetration": ("apps/motion/measures.py", "cv2.circle(img, (int(c), int(r)), 3, (220, 0, 0), -1, cv2.LINE_AA)", "None",
                                        [T + "apps/motion/test_figures.py::test_the_strip_shows_the_points_inside_the_body_in_red"]),
+    "floor_up_towards_ignored": ("core/scene/floor.py", "    if towards is None:\n        lo, hi", "    if True:\n        lo, hi",
+                                 [T + "apps/egohmr/test_user_checks.py::test_a_room_in_a_corner_of_a_large_floor_shows_its_floor_from_the_camera"]),
 }
 
 

@@ -89,12 +89,14 @@ def _angle(u: np.ndarray, axis: int) -> float:
     return float(np.degrees(np.arccos(np.clip(abs(u[axis]), 0.0, 1.0))))
 
 
-def check_up(points: np.ndarray, up: str, world: bool, path, warnings: list | None = None, seed: int = 0):
+def check_up(points: np.ndarray, up: str, world: bool, path, warnings: list | None = None, seed: int = 0,
+             camera=None):
     """Compare --up with the floor of the scene file (points in the file's axes, metres): refuse when the floor
     clearly faces along the other axis --up offers (naming it) or along x; warn when no floor stands out or it is
     tilted. world: the frame file gives 'world_to_camera' (else the file is in camera coordinates). Returns the
-    estimated up direction (file axes) or None."""
-    u, _, _ = floor_up(points, seed=seed)
+    estimated up direction (file axes) or None. camera: the camera centre in the file's axes (metres), inside the
+    room: the surfaces' normals are turned towards it (volsmpl.scene.floor.floor_up's `towards`)."""
+    u, _, _ = floor_up(points, seed=seed, towards=camera)
     where = f"--scene {path}"
     if u is None:
         warn("egohmr", f"{where}: the scan shows no floor with walls on opposite sides (a partial view?), so --up "

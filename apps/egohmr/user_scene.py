@@ -71,19 +71,26 @@ def read_user_inputs(args, warnings: list):
     raw = scan.overview(OVERVIEW_POINTS, seed=args.seed)
     check_extent(raw, args.units, args.scene, warnings)
     near = around_camera(frame, scan, args.up, raw, seed=args.seed)
-    u = check_up(near, args.up, frame.has_world, args.scene, warnings, seed=args.seed)
+    u = check_up(near, args.up, frame.has_world, args.scene, warnings, seed=args.seed,
+                 camera=camera_in_file(frame, args.up) if frame.has_world else None)
     check_camera_place(frame, to_y_up(near, args.up), where, warnings)
     return frame, scan.to_y_up(args.up), None if u is None else to_y_up(np.asarray(u)[None], args.up)[0]
+
+
+def camera_in_file(frame, up: str) -> np.ndarray:
+    """The camera centre of the frame's 'world_to_camera' (the Y-up world, metres) in the scene file's axes (--up).
+    Shape: -> (3,)."""
+    from volsmpl.scene.scan import from_y_up
+
+    T = frame.world_to_camera
+    return from_y_up((-T[:3, :3].T @ T[:3, 3])[None], up)[0]
 
 
 def around_camera(frame, scan, up: str, overview: np.ndarray, seed: int = 0) -> np.ndarray:
     """The points of `scan` (metres, the file's axes) within CHECK_RADIUS of the camera centre (per axis) at
     CHECK_SPACING; `overview` where they are fewer than CHECK_MIN or more than the sampler takes. The camera centre
     of 'world_to_camera' is in the Y-up world, so it is turned into the file's axes by --up first. Shape: (N, 3)."""
-    from volsmpl.scene.scan import from_y_up
-
-    T = frame.world_to_camera
-    c = from_y_up((-T[:3, :3].T @ T[:3, 3])[None], up)[0]
+    c = camera_in_file(frame, up)
     try:
         pts = scan.points(spacing=CHECK_SPACING, box=(c - CHECK_RADIUS, c + CHECK_RADIUS), seed=seed)
     except ValueError:                      # a scene too dense for the sampler there: the overview serves
@@ -134,6 +141,6 @@ def take(points: np.ndarray, centre, size: float, n: int, seed: int, spacing: fl
     return c[subsample(c, n, seed=seed)]
 
 
-__all__ = ["OVERVIEW_POINTS", "CHECK_RADIUS", "CHECK_SPACING", "CHECK_MIN", "DEFAULT_SPACING", "MAX_SPACING",
+__all__ = ["camera_in_file", "OVERVIEW_POINTS", "CHECK_RADIUS", "CHECK_SPACING", "CHECK_MIN", "DEFAULT_SPACING", "MAX_SPACING",
            "MIN_SPACING", "MAX_REGION_POINTS", "spacing_of", "read_user_inputs", "around_camera", "world_box",
            "cube_points", "take"]

@@ -84,12 +84,14 @@ def point_normals(points: np.ndarray, k: int = 16) -> tuple[np.ndarray, np.ndarr
     return v[:, :, 0], w[:, 0] / np.maximum(w.sum(1), 1e-30)
 
 
-def floor_up(points: np.ndarray, n: int = 20000, seed: int = 0, cone_deg: float = 15.0):
+def floor_up(points: np.ndarray, n: int = 20000, seed: int = 0, cone_deg: float = 15.0, towards=None):
     """The scene's up direction from its floor (module docstring): (up (3,) unit, or None when the scan does not
     show a floor clearly; the up direction's asymmetry; the largest asymmetry across the horizontal directions).
 
-    A direction d's asymmetry: the fraction of the flat points whose normal (turned towards the centre of the
-    scene's box) lies within `cone_deg` of d minus that within `cone_deg` of -d. The up direction is the one of
+    A direction d's asymmetry: the fraction of the flat points whose normal (turned towards `towards`, a point
+    inside the room such as the camera centre; default the centre of the scene's box) lies within `cone_deg` of d
+    minus that within `cone_deg` of -d. (The box's centre of a room in a corner of a large open floor lies outside
+    the room, so its walls' normals turn the same way and no room shows: give the camera.) The up direction is the one of
     largest asymmetry (the floor and the seats and tops below the middle face up). It is clear only where the scan
     shows a room around it: flat surfaces facing both horizontal directions (FLAT_SIDES of the flat points each,
     walls) that cancel (asymmetry at most WALLS_MAX: walls on opposite sides), while the up direction's asymmetry
@@ -104,8 +106,10 @@ def floor_up(points: np.ndarray, n: int = 20000, seed: int = 0, cone_deg: float 
     if keep.sum() < 50:
         return None, 0.0, 0.0
     nrm, p = nrm[keep], p[keep]
-    lo, hi = np.percentile(p, [1, 99], axis=0)
-    nrm *= np.where(((0.5 * (lo + hi) - p) * nrm).sum(1) < 0, -1.0, 1.0)[:, None]   # towards the box's centre
+    if towards is None:
+        lo, hi = np.percentile(p, [1, 99], axis=0)
+        towards = 0.5 * (lo + hi)
+    nrm *= np.where(((np.asarray(towards, np.float64) - p) * nrm).sum(1) < 0, -1.0, 1.0)[:, None]
     c = np.cos(np.radians(cone_deg))
 
     def facing(d):   # (fraction within the cone of d, of -d) for directions d (M, 3)

@@ -336,3 +336,18 @@ def test_a_principal_point_off_the_centre_is_warned_about():
     assert warnings_of((480, 640)) == []
     assert any("principal point (320, 240) lies far from the centre (240, 320)" in w and "[W, H]" in w
                for w in warnings_of((640, 480)))
+
+
+def test_a_room_in_a_corner_of_a_large_floor_shows_its_floor_from_the_camera():
+    """The room of `box_room` in a corner of a 20 x 20 m open floor: the centre of the points' box lies outside the
+    room, so with the normals turned towards it the room's opposite walls face the same way (no clear floor); turned
+    towards the camera centre inside the room they face each other, and the floor faces up (the y axis)."""
+    from volsmpl.scene.floor import floor_up
+
+    room = box_room()
+    rng = np.random.default_rng(3)
+    out = np.stack([rng.uniform(-2.5, 17.5, 40000), np.zeros(40000), rng.uniform(-2.0, 18.0, 40000)], 1)
+    scene = np.concatenate([room, out[~((out[:, 0] < 2.5) & (out[:, 2] < 2.0))]])
+    assert floor_up(scene)[0] is None
+    up, _, walls = floor_up(scene, towards=[0.5, 1.6, -1.5])
+    assert up is not None and abs(up[1]) > math.cos(math.radians(2)) and walls <= 0.1
