@@ -32,13 +32,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import torch
-from volsmpl.body.limits import (
-    clamp_to_limits,
-    contact_joints,
-    largest_change_deg,
-    limits_around,
-    violations,
-)
+from volsmpl.body.limits import (clamp_to_limits, contact_joints, joint_changes_deg, largest_change_deg, limits_around,
+                                 violations)
 from volsmpl.body.poses import BODY_JOINTS
 from volsmpl.optim import MaxIters, Patience, StopWhen, Term, Variable, optimize
 from volsmpl.report import paper
@@ -180,20 +175,7 @@ class RepairResult:
 
 def pose_change_deg(pose0, pose1) -> float:
     """Mean geodesic angle (degrees) between the joint rotations of two (69,) axis-angle body poses."""
-    from scipy.spatial.transform import Rotation
-
-    a = Rotation.from_rotvec(np.asarray(pose0, np.float64).reshape(-1, 3))
-    b = Rotation.from_rotvec(np.asarray(pose1, np.float64).reshape(-1, 3))
-    return float(np.degrees((a.inv() * b).magnitude()).mean())
-
-
-def _joint_changes_deg(pose0, pose1) -> np.ndarray:
-    """(23,) geodesic rotation change (degrees) of each body joint between two (69,) poses."""
-    from scipy.spatial.transform import Rotation
-
-    a = Rotation.from_rotvec(np.asarray(pose0, np.float64).reshape(-1, 3))
-    b = Rotation.from_rotvec(np.asarray(pose1, np.float64).reshape(-1, 3))
-    return np.degrees((a.inv() * b).magnitude())
+    return float(joint_changes_deg(pose0, pose1).mean())
 
 
 def check_case(case: Case) -> None:
@@ -243,7 +225,7 @@ def repair_case(body, volume, case: Case, cfg: SelfPenConfig = SelfPenConfig(), 
     res.moved_joints = [BODY_JOINTS[j] for j in np.flatnonzero(moving)]
     still = ~moving
     if still.any():
-        d = _joint_changes_deg(case.body_pose, final_pose)
+        d = joint_changes_deg(case.body_pose, final_pose)
         j = int(np.flatnonzero(still)[d[still].argmax()])
         res.still_change_deg, res.still_change_joint = float(d[j]), BODY_JOINTS[j]
     lo, hi = limits_around(case.body_pose)

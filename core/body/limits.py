@@ -129,13 +129,18 @@ def violations(body_pose, lo=None, hi=None, tol_deg: float = 0.5) -> list:
             for j, a in torch.nonzero(over).tolist()]
 
 
-def largest_change_deg(pose0, pose1) -> tuple[float, str]:
-    """(degrees, joint): the largest geodesic rotation change over the 23 body joints between two (69,) poses."""
+def joint_changes_deg(pose0, pose1) -> np.ndarray:
+    """The geodesic rotation change (degrees) of each joint between two axis-angle poses. Shape: (J*3,) -> (J,)."""
     from scipy.spatial.transform import Rotation
 
     a = Rotation.from_rotvec(np.asarray(pose0, np.float64).reshape(-1, 3))
     b = Rotation.from_rotvec(np.asarray(pose1, np.float64).reshape(-1, 3))
-    d = np.degrees((a.inv() * b).magnitude())
+    return np.degrees((a.inv() * b).magnitude())
+
+
+def largest_change_deg(pose0, pose1) -> tuple[float, str]:
+    """(degrees, joint): the largest geodesic rotation change over the 23 body joints between two (69,) poses."""
+    d = joint_changes_deg(pose0, pose1)
     j = int(d.argmax())
     return float(d[j]), BODY_JOINTS[j]
 
