@@ -31,7 +31,7 @@ import torch
 from volsmpl.runtime.meter import Meter, sync
 from .stops import MaxIters
 
-__all__ = ["Variable", "Term", "Evaluation", "StepRecord", "OptimResult", "optimize"]
+__all__ = ["Variable", "Term", "State", "Evaluation", "StepRecord", "OptimResult", "optimize"]
 
 OPTIMIZERS = {"adam": torch.optim.Adam, "adamw": torch.optim.AdamW, "sgd": torch.optim.SGD}
 
@@ -44,6 +44,8 @@ class Variable:
     consecutive values per iteration (e.g. 0.1 rad per axis-angle joint with group=3); a longer update is
     scaled down as a whole (its direction kept: a trust region). None: no limit. project: values (B, ...) -> values
     inside a feasible set, applied without gradient after every update (a hard bound, e.g. joint limits).
+    start: the first update that changes it (a coarse-to-fine schedule: 0, every update); before it the variable
+    is held at its value and the optimiser keeps no state for it (Adam's moments begin at its first update).
     """
 
     value: torch.Tensor
@@ -51,6 +53,7 @@ class Variable:
     max_step: float | None = None
     group: int = 1
     project: Callable | None = None
+    start: int = 0
 
 
 @dataclass
@@ -182,6 +185,8 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
                              f"{v.value[0].numel()} values per problem")
         if not torch.isfinite(v.value).all():
             raise ValueError(f"variable '{n}' starts with NaN or Inf values")
+        if not isinstance(v.start, int) or v.start < 0:
+            raise ValueError(f"variable '{n}': start must be an update number >= 0, got {v.start!r}")
     params = {n: v.value.detach().clone().requires_grad_(True) for n, v in vars_.items()}
     groups = [{"params": [params[n]], "lr": v.lr if v.lr is not None else lr} for n, v in vars_.items()]
     if callable(optimizer):
@@ -235,6 +240,9 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
                 if updated:
                     opt.zero_grad(set_to_none=True)
                     (total * active.to(total.dtype)).sum().backward()
+                    for n, v in vars_.items():
+                        if it < v.start:  # held: no gradient, so the optimiser neither moves it nor keeps state
+                            params[n].grad = None
                     old = {n: p.detach().clone() for n, p in params.items()}
                     opt.step()
                     if sched is not None:

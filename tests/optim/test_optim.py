@@ -178,3 +178,22 @@ def test_project_is_a_hard_bound_after_every_update():
     assert res.variables["x"][0, 0].item() == pytest.approx(1.0)
     assert res.variables["x"][1, 0].item() == pytest.approx(2.0, abs=1e-4)
     assert max(seen) <= 1.0
+
+
+def test_a_variable_with_a_start_is_held_until_then_and_adam_begins_afresh():
+    """x starts at update 3: its values stay 0 through updates 0-2 while y moves; at update 3 Adam's first
+    (bias-corrected) step moves it by exactly lr against the gradient's sign, as a fresh Adam would. Had the
+    optimiser kept state for it (zero gradients counted as steps), that step would be (1 - 0.9) / (1 - 0.9^4) lr."""
+    seen = []
+
+    def term(s):
+        seen.append((float(s.x[0, 0]), float(s.y[0, 0])))
+        return ((s.x - 5.0) ** 2).sum(1) + ((s.y - 5.0) ** 2).sum(1)
+
+    optimize({"x": Variable(torch.zeros(1, 1), start=3), "y": torch.zeros(1, 1)}, {"f": term}, optimizer="adam",
+             lr=0.1, max_iters=4, progress=False)
+    assert [x for x, _ in seen[:4]] == [0.0, 0.0, 0.0, 0.0]
+    assert seen[3][1] == pytest.approx(0.3, abs=1e-3)  # y took its three steps of about lr
+    assert seen[4][0] == pytest.approx(0.1, abs=1e-6)
+    with pytest.raises(ValueError, match="start must be"):
+        optimize({"x": Variable(torch.zeros(1, 1), start=-1)}, {"f": term}, max_iters=1, progress=False)
