@@ -415,6 +415,16 @@ MUTANTS = {
                                        [T + "apps/motion/test_figures.py::test_the_strip_shows_the_points_inside_the_body_in_red"]),
     "floor_up_towards_ignored": ("core/scene/floor.py", "    if towards is None:\n        lo, hi", "    if True:\n        lo, hi",
                                  [T + "apps/egohmr/test_user_checks.py::test_a_room_in_a_corner_of_a_large_floor_shows_its_floor_from_the_camera"]),
+    "optim_start_ignored": ("core/optim/harness.py", "                        if it < v.start:", "                        if False:",
+                            [T + "optim/test_optim.py::test_a_variable_with_a_start_is_held_until_then_and_adam_begins_afresh"]),
+    "hoi_silhouette_not_relative": ("apps/hoi/losses.py", "    return chamfer / spread.clamp_min(1.0 / K[:, 0, 0] ** 2)", "    return chamfer",
+                                    [T + "apps/hoi/test_losses.py::test_silhouette_is_relative_to_the_silhouettes_spread"]),
+    "hoi_along_ray_keeps_the_depth": ("apps/hoi/fit.py", "    best = offsets[losses.argmin(dim=0)]", "    best = offsets[:1].expand(losses.shape[1])",
+                                      [T + "apps/hoi/test_fit.py::test_along_ray_moves_the_object_to_its_depth_and_keeps_its_projection"]),
+    "hoi_mesh_weight_always_w_pen": ("apps/hoi/fit.py", 'if volume.kind == "mesh" and cfg.w_pen_mesh is not None', "if False",
+                                     [T + "apps/hoi/test_fit.py::test_presets_give_the_papers_weights_and_ours"]),
+    "hoi_rotation_never_held": ("apps/hoi/problem.py", 'start=self.rotation_start if who == "object" else 0', "start=0",
+                                [T + "apps/hoi/test_fit.py::test_the_objects_rotation_is_held_for_its_share_of_the_steps"]),
 }
 
 

@@ -5,7 +5,7 @@
     volsmpl hoi fit --case my_case.json --model volsmpl --out out/hoi_fit   # a user's own case file (apps/hoi/case.py)
     volsmpl hoi make-case --object mug.obj --units mm --category cup --body pose.json --image-size 480,640 \
         --focal 600 --mask mask.png --contact right_hand:handle --out my_case.json   # that file, without code (make_case.py)
-    volsmpl hoi tune --model volsmpl --cases 13 --out docs/hoi    # the image weights on the tuning half (tune.py)
+    volsmpl hoi tune --grid w_silhouette=1e3,4e3 --model volsmpl --batch 10 --out docs/hoi   # weights on the tuning half
 
 Writes OUT/results.json (volsmpl.apps.table's envelope: config, summary.<kind>, the paper's Table 3, per-case
 records per kind, figures, meta), OUT/case_<name>.png for the first --render cases and OUT/summary.png; each
@@ -41,7 +41,7 @@ ACTIONS = ("run", "make-db", "fit", "tune", "make-case")
 
 def add_parser(sub):
     from . import make_case
-    from .fit import FitConfig
+    from .fit import PRESETS, FitConfig
 
     d = FitConfig()
     p = sub.add_parser("hoi", help="human-object joint optimisation: VolumetricSMPL vs COAP vs exact mesh (Table 3)",
@@ -50,7 +50,7 @@ def add_parser(sub):
                                    "(supp. D.1); report time per iteration, collisions and contact per model kind.")
     p.add_argument("action", nargs="?", default="run", choices=ACTIONS,
                    help="run (default): fit database cases; make-db: build the database; fit: one case file; "
-                        "tune: the image weights on the database's tuning half (tune.py); make-case: a case file "
+                        "tune: weights on the database's tuning half (--grid, tune.py); make-case: a case file "
                         "from your mesh, body, camera, mask and contacts (--out CASE.json, make_case.py)")
     add_common(p, out="out/hoi", seed="the interaction database's seed")
     p.add_argument("--cases", default="all", help="'all', a number N (the first N of the split) or comma-separated names")
@@ -60,6 +60,10 @@ def add_parser(sub):
     p.add_argument("--case", default=None, help="with 'fit': a case file (format in apps/hoi/case.py)")
     p.add_argument("--db", default=None, help="database folder (default: the user cache, per seed)")
     p.add_argument("--n", type=int, default=100, help="with make-db: number of cases")
+    p.add_argument("--preset", default="tuned", choices=sorted(PRESETS),
+                   help="weights and schedule: 'tuned' (ours: normal 1e2, penetration 1e5, the object moved along its "
+                        "camera ray first, its rotation held for 40 %% of the steps) or 'paper' (normal 1e3, "
+                        "penetration 1e4, 1e3 with the exact mesh, every variable from the first step)")
     p.add_argument("--iters", type=int, default=d.iters, help=f"optimisation steps (paper {d.iters})")
     p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (paper {d.lr:g})")
     p.add_argument("--w-keypoints", type=float, default=d.w_keypoints, help="weight of the keypoint term (tuned)")
@@ -71,7 +75,9 @@ def add_parser(sub):
                    help="metres: contact distances beyond this count linearly (pseudo-Huber); 0: squared throughout")
     p.add_argument("--batch", type=int, default=1,
                    help="cases optimised together (padded; each as if alone); ms/iter is the batch's divided by it")
-    p.add_argument("--grid", default="1e4,1e5,1e6,1e7", help="tune: the image weights tried (comma-separated)")
+    p.add_argument("--grid", action="append", default=None, metavar="NAME=V1,V2",
+                   help="tune: a weight and the values tried (repeat for more weights: every combination is fitted); "
+                        "default w_silhouette=1e3,4e3,1.6e4")
     make_case.add_arguments(p)
     return p
 
@@ -93,22 +99,57 @@ def select_cases(cases: list, index: dict, split: str, which: str) -> list:
     return [by_name[n] for n in names]
 
 
+#: the measures of a fit summarised per back-end and per kind of case (mean and median, before and after)
+MEASURES = ("collision_pct", "contact_cm", "obj_trans_err_cm", "obj_rot_err_deg", "scale_err_pct",
+            "human_scale_err_pct")
+#: the handheld categories whose fits must stay out of the body (the flag `small_inside`)
+SMALL = ("cup", "phone", "bottle")
+
+
+def _values(results: list, key: str, when: str) -> list:
+    """The defined values of one measure (None: not defined, a ball's rotation) over the results."""
+    xs = [r.__dict__[when].get(key) for r in results]
+    return [x for x in xs if x is not None]
+
+
 def summarize(results: list) -> dict:
-    """A model's row: means over its cases (peak memory: the largest), before and after the fit."""
-    def mean(key, when="after"):
-        xs = [r.__dict__[when].get(key) for r in results]
-        xs = [x for x in xs if x is not None]
-        return float(np.mean(xs)) if xs else None
+    """A model's row: means over its cases (peak memory: the largest), before and after the fit, and the medians
+    (`<measure>_median`, `<measure>_median_before`)."""
+    def stat(key, when="after", f=np.mean):
+        xs = _values(results, key, when)
+        return float(f(xs)) if xs else None
 
     total = float(np.mean([r.total_s for r in results])) if results else None
     out = {"n_cases": len(results), "ms_per_iter": float(np.mean([r.ms_per_iter for r in results])) if results else None,
            "peak_mem_mb": max((r.peak_mem_mb for r in results), default=None), "total_s": total,
            "iter_ms": None, "total_min": None if total is None else total / 60}
     out["iter_ms"] = out["ms_per_iter"]
-    for key in ("collision_pct", "contact_cm", "obj_trans_err_cm", "obj_rot_err_deg", "scale_err_pct",
-                "human_scale_err_pct"):
-        out[key] = mean(key)
-        out[key + "_before"] = mean(key, "before")
+    for key in MEASURES:
+        out[key] = stat(key)
+        out[key + "_before"] = stat(key, "before")
+    for key in MEASURES:
+        out[key + "_median"] = stat(key, f=np.median)
+        out[key + "_median_before"] = stat(key, "before", np.median)
+    return out
+
+
+def by_kind(results: list, kind_of) -> dict:
+    """{kind: {'n', '<measure>_median_before', '<measure>_median', 'worse_rotation'}} of a model's results grouped
+    by `kind_of(name)` (the case's kind: 'sit_chair', 'hold_cup', ...; a user's case: its category). worse_rotation:
+    the cases whose rotation error grew."""
+    groups = {}
+    for r in results:
+        groups.setdefault(kind_of(r.name), []).append(r)
+    out = {}
+    for k, rs in sorted(groups.items()):
+        row = {"n": len(rs)}
+        for key in MEASURES:
+            for when, suffix in (("before", "_median_before"), ("after", "_median")):
+                xs = _values(rs, key, when)
+                row[key + suffix] = float(np.median(xs)) if xs else None
+        row["worse_rotation"] = sum(1 for r in rs if r.after.get("obj_rot_err_deg") is not None
+                                    and r.after["obj_rot_err_deg"] > r.before.get("obj_rot_err_deg", np.inf))
+        out[k] = row
     return out
 
 
@@ -127,12 +168,12 @@ def _cases(args, split: str, database) -> list:
 
 #: the options each action reads (volsmpl.apps.checks.applies refuses the others)
 _COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device"}
-_FIT = {"iters", "lr", "w_keypoints", "w_silhouette", "contact_fraction", "contact_huber"}
+_FIT = {"preset", "iters", "lr", "w_keypoints", "w_silhouette", "contact_fraction", "contact_huber"}
 USES = {"make-db": {"n", "seed", "db", "threads"},
         "run": _COMMON | _FIT | {"resume", "render", "cases", "split", "db", "seed", "batch", "save_meshes"},
         "fit": _COMMON | _FIT | {"resume", "render", "case", "save_meshes"},  # fit writes its meshes always
-        "tune": _COMMON | {"iters", "lr", "contact_fraction", "contact_huber", "cases", "split", "db", "seed",
-                           "grid"},
+        "tune": _COMMON | {"preset", "iters", "lr", "contact_fraction", "contact_huber", "cases", "split", "db", "seed",
+                           "grid", "batch"},
         "make-case": {"object", "units", "category", "size_m", "body", "keypoints", "image_size", "focal",
                       "principal", "K", "object_pose", "mask", "contact", "out"}}
 
@@ -188,7 +229,9 @@ def run(args) -> int:
     if args.action == "tune":
         if args.split not in (None, "tune"):
             raise ValueError(f"tune fits the database's tuning half: drop --split {args.split}")
-        from .tune import run_tune
+        from .tune import parse_grid, run_tune
+        args.grid = args.grid or ["w_silhouette=1e3,4e3,1.6e4"]
+        parse_grid(args.grid)  # a wrong --grid stops here, before the database is read
         cases = _cases(args, "tune", database)
         with claim_out(args.out, "hoi"):
             return run_tune(args, cases)
@@ -230,8 +273,9 @@ def _run(args, models: list, ckpts: dict) -> int:
 
     split = args.split or "test"
     out = Path(args.out)
-    cfg = FitConfig(iters=args.iters, lr=args.lr, w_keypoints=args.w_keypoints, w_silhouette=args.w_silhouette,
-                    contact_fraction=args.contact_fraction, contact_huber=args.contact_huber, device=args.device)
+    cfg = FitConfig.preset(args.preset, iters=args.iters, lr=args.lr, w_keypoints=args.w_keypoints,
+                           w_silhouette=args.w_silhouette, contact_fraction=args.contact_fraction,
+                           contact_huber=args.contact_huber, device=args.device)
     if args.action == "fit":
         if not args.case:
             raise ValueError("'volsmpl hoi fit' needs --case FILE (a case file, format in apps/hoi/case.py)")
@@ -242,10 +286,12 @@ def _run(args, models: list, ckpts: dict) -> int:
     warnings = []
     check_data(cases, body, args.device, warnings)
     vols = volumes(body, models, ckpts, args.device)
-    config = {**asdict(cfg), "models": models, "checkpoints": checkpoint_names(models, ckpts), "split": split,
+    config = {**asdict(cfg), "preset": args.preset, "models": models, "checkpoints": checkpoint_names(models, ckpts), "split": split,
               "seed": args.seed, "batch": args.batch, "cases_requested": len(cases),
               "threads": torch.get_num_threads()}
     store = CaseRecords(out, "hoi", resume=args.resume)
+    # each case's kind for the per-kind medians: the database's (sit_chair, hold_cup, ...), else its category
+    kind_of = {c.name: getattr(c, "kind", None) or c.category for c in cases}
     per_model = {m: [] for m in models}
     save = args.action == "fit" or args.save_meshes  # a user's own case: its meshes always
     for i0 in progress(range(0, len(cases), args.batch), f"hoi {','.join(models)}", quiet=args.quiet,
@@ -282,12 +328,13 @@ def _run(args, models: list, ckpts: dict) -> int:
         # results so far, after every batch: a long run stopped early still leaves its finished cases
         done = i0 + len(group)
         summary = {m: summarize(rs) for m, rs in per_model.items()}
+        kinds = {m: by_kind(rs, lambda n: kind_of.get(n, "case")) for m, rs in per_model.items()}
         figures = {"summary": "summary.png",
                    **{f"case_{c.name}": f"case_{safe_name(c.name)}.png" for c in cases[: min(done, args.render)]}}
         recs_out = {m: [dict(vars(r)) for r in rs] for m, rs in per_model.items()}
         flagged = flag_cases(recs_out, "name", GOOD)
         result = envelope("hoi", config, summary, paper.rows("hoi"), recs_out, machine_info(args.device), figures,
-                          flagged=flagged, warnings=warnings)
+                          flagged=flagged, warnings=warnings, by_kind=kinds)
         summary_plot(out / "summary.png", summary)
         write_results(out, result)
     note = store.note()

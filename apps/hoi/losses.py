@@ -22,8 +22,9 @@ points (camera frame for the image terms, the human's body frame for contact and
   COAP's occupancy term). The body's pose is fixed during the joint stage, so `body_query` prepares it once.
 - `scale_prior`: |s - s_prior| per similarity (the paper's language-model prior stands in a table of real sizes).
 - `keypoint_term`, `silhouette_term`: the first stage's observations, kept: squared reprojection error of the body
-  joints (confidence-weighted) and a two-way 2D Chamfer between the projected object vertices and the silhouette
-  pixels, both in units of the focal length (so about radians^2), by kornia's pinhole projection.
+  joints (confidence-weighted, in units of the focal length: about radians^2) and a two-way 2D Chamfer between the
+  projected object vertices and the silhouette pixels relative to the silhouette's spread (dimensionless), by
+  kornia's pinhole projection.
 All functions are batched over cases (B, ...); object points may be padded, with a mask.
 """
 from __future__ import annotations
@@ -228,16 +229,32 @@ def keypoint_term(joints_cam: torch.Tensor, keypoints: torch.Tensor, K: torch.Te
 
 def silhouette_term(obj_cam: torch.Tensor, obj_mask: torch.Tensor, silhouette: torch.Tensor, sil_mask: torch.Tensor,
                     K: torch.Tensor) -> torch.Tensor:
-    """Two-way 2D Chamfer (mean squared nearest distances, focal-length units) between the projected object
-    vertices and the silhouette's pixels.
+    """Two-way 2D Chamfer (mean squared nearest distances) between the projected object vertices and the silhouette's
+    pixels, divided by the silhouette's spread (the mean squared distance of its pixels from their centroid): a
+    dimensionless term that charges a turn of the object the same whatever its size in the image. Without the
+    division a cup 3 m away (spread 1.9e-4 focal lengths squared) is held 200x more weakly than a bed (4e-2): at
+    the truth of the database's tuning cups and phones its rotation gradient is 1-4, the contact normal term's
+    350-870, and the fit turns them over.
 
     Shape: obj_cam (B, N, 3), obj_mask (B, N), silhouette (B, S, 2), sil_mask (B, S), K (B, 3, 3) -> (B,).
+    Example:
+        >>> K = torch.tensor([[[100.0, 0, 0], [0, 100, 0], [0, 0, 1]]])
+        >>> sil = torch.tensor([[[-10.0, 0], [10.0, 0]]])          # spread 10^2 px^2
+        >>> x = torch.tensor([[[0.0, 0.0, 1.0]]])                  # projects to (0, 0): 10 px from both pixels
+        >>> float(silhouette_term(x, torch.ones(1, 1, dtype=torch.bool), sil, torch.ones(1, 2, dtype=torch.bool), K))
+        2.0
     """
-    uv = _project(obj_cam, K) / K[:, 0, 0][:, None, None]
-    sil = silhouette / K[:, 0, 0][:, None, None]
+    f = K[:, 0, 0][:, None, None]
+    uv = _project(obj_cam, K) / f
+    sil = silhouette / f
     d2 = torch.cdist(uv, sil).square()
     big = torch.finfo(d2.dtype).max
     a = d2.masked_fill(~sil_mask[:, None, :], big).min(dim=2).values  # each vertex to its nearest pixel
     b = d2.masked_fill(~obj_mask[:, :, None], big).min(dim=1).values  # each pixel to its nearest vertex
     ma, mb = obj_mask.to(d2.dtype), sil_mask.to(d2.dtype)
-    return (a * ma).sum(1) / ma.sum(1).clamp_min(1) + (b * mb).sum(1) / mb.sum(1).clamp_min(1)
+    chamfer = (a * ma).sum(1) / ma.sum(1).clamp_min(1) + (b * mb).sum(1) / mb.sum(1).clamp_min(1)
+    n = mb.sum(1).clamp_min(1)[:, None]
+    centre = (sil * mb[..., None]).sum(1) / n
+    spread = ((sil - centre[:, None]).square().sum(-1) * mb).sum(1) / n[:, 0]
+    # a one-pixel silhouette has no spread: a pixel's (1 / f^2) stands in for it
+    return chamfer / spread.clamp_min(1.0 / K[:, 0, 0] ** 2)

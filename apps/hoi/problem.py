@@ -172,6 +172,7 @@ class Problem:
             self.patch_k = torch.tensor([max(1, math.ceil(cfg.contact_fraction * len(p[0]))) for p in self.pairs],
                                         device=dev)
         self.contact_fraction, self.contact_huber = cfg.contact_fraction, cfg.contact_huber
+        self.rotation_start = round(cfg.rotation_after * cfg.iters)  # the first step that turns the object
         self.K = torch.as_tensor(np.stack([c.K for c in cases]), dtype=dt, device=dev)
         self.kp = torch.as_tensor(np.stack([c.keypoints_2d for c in cases]), dtype=dt, device=dev)
         self.sil, self.sil_mask = _pad([c.silhouette[:: max(1, -(-len(c.silhouette) // cfg.silhouette_points))]
@@ -209,7 +210,7 @@ class Problem:
             R = torch.as_tensor(np.stack([s[who].rotation for s in sims]), dtype=torch.float32, device=dev)
             t = torch.as_tensor(np.stack([s[who].translation / s[who].scale for s in sims]), dtype=torch.float32,
                                 device=dev)
-            out[f"{who}_rot6d"] = Variable(matrix_to_rotation_6d(R))
+            out[f"{who}_rot6d"] = Variable(matrix_to_rotation_6d(R), start=self.rotation_start if who == "object" else 0)
             out[f"{who}_transl"] = Variable(t + (R @ self.centre[who][..., None])[..., 0])
         hs = np.array([s["human"].scale for s in sims])
         os_ = np.array([s["object"].scale for s in sims])

@@ -1,12 +1,15 @@
-"""Tuning of the human–object weights that the paper does not give (the image terms), on the database's tuning half.
+"""Tuning of the human–object weights on the database's tuning half.
 
-    volsmpl hoi tune --cases 13 --grid 1e4,1e5,1e6,1e7 --model volsmpl --threads 1 --out docs/hoi     # docs/hoi/tune.json
+    volsmpl hoi tune --grid w_silhouette=1e3,4e3,1.6e4 --model volsmpl --cases all --batch 10 --out docs/hoi
+    volsmpl hoi tune --grid w_silhouette=1e3,4e3 --grid w_normal=1e2,1e3 ...      # every combination of the two
 
-Every grid value sets both image weights (keypoints and silhouette); each model kind fits the first --cases of the
-'tune' split (13: one case of each kind) at the paper's settings otherwise. The score of a value is the mean over
-kinds and cases of contact_cm + obj_trans_err_cm + collision_pct after the fit (all lower is better: the contact
-and the object's placement in cm, the object's vertices inside the body in %); the best value becomes FitConfig's
-default and is reported on the 'test' split only. Per-case records of every value are written too.
+Each --grid names a weight of FitConfig (a `w_` field) and its values; the settings tried are every combination,
+each model kind fitting the selected cases of the 'tune' split at FitConfig's defaults otherwise (--batch cases
+at a time). The score of a setting is the mean over kinds and cases of contact_cm + obj_trans_err_cm +
+obj_rot_err_deg + collision_pct after the fit (all lower is better: the contact and the object's placement in cm,
+its rotation in degrees, the object's vertices inside the body in %; a ball's rotation counts 0); the best
+setting becomes FitConfig's default and is reported on the 'test' split only. Per-case records of every setting
+are written to OUT/tune.json after each setting.
 """
 from __future__ import annotations
 
@@ -16,43 +19,72 @@ import numpy as np
 
 
 def score(results: list) -> float:
-    """Mean over the cases of contact_cm + obj_trans_err_cm + collision_pct after the fit."""
-    vals = [r.after.get("contact_cm", np.nan) + r.after.get("obj_trans_err_cm", np.nan) + r.after["collision_pct"]
-            for r in results]
+    """Mean over the cases of contact_cm + obj_trans_err_cm + obj_rot_err_deg + collision_pct after the fit (a
+    rotation of None, a ball's, counts 0)."""
+    vals = [r.after.get("contact_cm", np.nan) + r.after.get("obj_trans_err_cm", np.nan)
+            + (r.after.get("obj_rot_err_deg") or 0.0) + r.after.get("collision_pct", np.nan) for r in results]
     return float(np.nanmean(vals)) if vals else float("nan")
 
 
+def parse_grid(specs: list) -> dict:
+    """--grid NAME=v1,v2 ... -> {NAME: [v1, v2]}: NAME a weight of FitConfig (a `w_` field), the values numbers
+    >= 0; one line naming the fix otherwise."""
+    from dataclasses import fields
+
+    from .fit import FitConfig
+
+    weights = [f.name for f in fields(FitConfig) if f.name.startswith("w_")]
+    grid = {}
+    for spec in specs:
+        name, eq, values = spec.partition("=")
+        name = name.strip().replace("-", "_")
+        if not eq or name not in weights:
+            raise ValueError(f"--grid {spec!r}: give a weight and its values, NAME=v1,v2 with NAME one of "
+                             f"{', '.join(weights)}")
+        try:
+            vals = [float(x) for x in values.split(",") if x.strip()]
+        except ValueError:
+            raise ValueError(f"--grid {spec!r}: the values must be comma-separated numbers, e.g. 1e3,4e3") from None
+        if not vals or not all(np.isfinite(v) and v >= 0 for v in vals):
+            raise ValueError(f"--grid {spec!r}: give one or more finite weights >= 0")
+        if name in grid:
+            raise ValueError(f"--grid names {name} twice: give its values once")
+        grid[name] = vals
+    return grid
+
+
 def run_tune(args, cases: list) -> int:
-    """`volsmpl hoi tune`: each --grid value as both image weights, every kind of --model fitting `cases` (the
-    tuning half's selection) at the other settings given; writes OUT/tune.json after every value."""
+    """`volsmpl hoi tune`: every combination of the --grid weights, every kind of --model fitting `cases` (the
+    tuning half's selection, --batch at a time) at FitConfig's defaults otherwise; writes OUT/tune.json after every
+    setting."""
+    import itertools
+
     import volsmpl
     from volsmpl.apps.progress import progress, steps_bar
     from volsmpl.apps.table import check_common, checkpoint_names, volumes, write_results
 
     from .console import case_line
-    from .fit import FitConfig, Problem, fit_case
+    from .fit import FitConfig, fit_cases
 
-    try:
-        grid = [float(x) for x in args.grid.split(",") if x.strip()]
-    except ValueError:
-        raise ValueError(f"--grid {args.grid!r}: give comma-separated numbers, e.g. 1e4,1e5,1e6") from None
-    if not grid:
-        raise ValueError(f"--grid {args.grid!r} names no weight: give comma-separated numbers")
+    grid = parse_grid(args.grid)
     models, ckpts = check_common(args)
     body = volsmpl.create_body().to(args.device)
     vols = volumes(body, models, ckpts, args.device)
-    base = FitConfig(iters=args.iters, lr=args.lr, contact_fraction=args.contact_fraction,
-                     contact_huber=args.contact_huber, device=args.device)
+    base = FitConfig.preset(args.preset, iters=args.iters, lr=args.lr, contact_fraction=args.contact_fraction,
+                            contact_huber=args.contact_huber, device=args.device)
     rows = []
-    for w in grid:
-        cfg = replace(base, w_keypoints=w, w_silhouette=w)
+    for values in itertools.product(*grid.values()):
+        setting = dict(zip(grid, values))
+        label = " ".join(f"{k} {v:g}" for k, v in setting.items())
+        cfg = replace(base, **setting)
         res = {m: [] for m in models}
         for m in models:
-            for c in progress(cases, f"hoi tune w_image {w:g} {m}", quiet=args.quiet):
-                r = fit_case(c, body, vols[m], cfg, Problem(c, body, vols[m], cfg), progress=steps_bar(args.quiet))
-                res[m].append(r)
-                print(f"w_image {w:g} {case_line(c.name, m, r)}", flush=True)
-        row = {"w_image": w, "score": float(np.mean([score(rs) for rs in res.values()])),
+            for i0 in progress(range(0, len(cases), args.batch), f"hoi tune {label} {m}", quiet=args.quiet):
+                group = cases[i0:i0 + args.batch]
+                for c, r in zip(group, fit_cases(group, body, vols[m], cfg, progress=steps_bar(args.quiet))):
+                    res[m].append(r)
+                    print(f"{label} {case_line(c.name, m, r)}", flush=True)
+        row = {"setting": setting, "score": float(np.mean([score(rs) for rs in res.values()])),
                "per_model": {m: {"score": score(rs),
                                  **{k: float(np.nanmean([np.nan if r.after.get(k) is None else r.after[k] for r in rs]))
                                     for k in ("contact_cm", "obj_trans_err_cm", "obj_rot_err_deg", "collision_pct",
@@ -60,12 +92,13 @@ def run_tune(args, cases: list) -> int:
                                  "cases": {r.name: r.after for r in rs}}
                              for m, rs in res.items()}}
         rows.append(row)
-        print(f"w_image {w:g}: score {row['score']:.3f}", flush=True)
-        best = min(rows, key=lambda r: r["score"])  # written after every value: a stopped run keeps what it did
+        print(f"{label}: score {row['score']:.3f}", flush=True)
+        best = min(rows, key=lambda r: r["score"])  # written after every setting: a stopped run keeps what it did
         path = write_results(args.out, {"cases": [c.name for c in cases], "models": models,
-                                        "checkpoints": checkpoint_names(models, ckpts),
-                                        "config": {k: v for k, v in asdict(cfg).items() if k not in
-                                                   ("w_keypoints", "w_silhouette")},
-                                        "rows": rows, "best": best}, "tune.json")
-    print(f"best w_image {best['w_image']:g} (score {best['score']:.3f}); wrote {path}")
+                                        "checkpoints": checkpoint_names(models, ckpts), "grid": grid,
+                                        "preset": args.preset,
+                                        "config": {k: v for k, v in asdict(base).items() if k not in grid},
+                                        "batch": args.batch, "rows": rows, "best": best}, "tune.json")
+    print(f"best {' '.join(f'{k} {v:g}' for k, v in best['setting'].items())} (score {best['score']:.3f}); "
+          f"wrote {path}")
     return 0

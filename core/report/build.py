@@ -99,8 +99,8 @@ SECTIONS: dict[str, Section] = {
                                        "for S in 0 1 2 3; do volsmpl selfpen --model volsmpl,coap --sampler-seed $S "
                                        "--out out/selfpen_s$S; done; python tools/selfpen_seeds.py")},
                     (), tune=True),   # the figures: those results.json lists
-    "hoi": _app("hoi", ("3",), "Human-object reconstruction", command="volsmpl hoi --model volsmpl,coap,mesh --split test "
-                                                                      "--out out/hoi"),
+    "hoi": _app("hoi", ("3",), "Human-object reconstruction", rs.hoi_section,
+                command="volsmpl hoi --model volsmpl,coap,mesh --split test --out out/hoi"),
     "egohmr": _app("egohmr", ("4",), "Human mesh recovery in 3D scenes (EgoHMR)",
                    command="volsmpl egohmr sample --split test --tuned docs/egohmr/tune.json --out out/egohmr"),
     "motion": _app("motion", ("5", "D.1"), "Scene-constrained motion synthesis", rs.motion_section,

@@ -321,6 +321,27 @@ def motion_section(ctx) -> list[str]:
     return summary_section(ctx) + ([""] + table if table else [])
 
 
+def hoi_section(ctx) -> list[str]:
+    """Table 3 from `volsmpl hoi` (summary_section), then the medians over the cases of each back-end before -> after
+    the fit, overall and per kind of case (results.json `by_kind`), with the cases whose rotation error grew."""
+    d = ctx["results"].get(ctx["name"]) or {}
+    out = summary_section(ctx)
+    summary, kinds = d.get("summary") or {}, d.get("by_kind") or {}
+    cols = (("obj_rot_err_deg", "rotation [deg]"), ("contact_cm", "contact [cm]"), ("obj_trans_err_cm", "object [cm]"),
+            ("collision_pct", "inside [%]"))
+    arrow = lambda r, k: f"{fmt(r.get(k + '_median_before'))} -> {fmt(r.get(k + '_median'))}"  # noqa: E731
+    worse = lambda m: str(sum(r.get("worse_rotation", 0) for r in (kinds.get(m) or {}).values())) if m in kinds else ""  # noqa: E731
+    rows = [[m, "all", str(s.get("n_cases", "")), *[arrow(s, k) for k, _ in cols], worse(m)]
+            for m, s in summary.items() if isinstance(s, dict) and "obj_rot_err_deg_median" in s]
+    rows += [[m, k, str(r.get("n", "")), *[arrow(r, c) for c, _ in cols], str(r.get("worse_rotation", ""))]
+             for m, per in kinds.items() for k, r in per.items()]
+    if rows:
+        out += ["", "Medians over the cases, first stage -> fit (each back-end; `rotation worse`: the cases whose "
+                    "rotation error grew):", ""]
+        out += md_table(["back-end", "kind", "n", *[c for _, c in cols], "rotation worse"], rows)
+    return out
+
+
 def tuning_note(t) -> list[str]:
     """The lines saying which rows a result tuned on which cases (`tuning`: tune_scenes, test_scenes, choice
     {back-end: weight}, criterion); none without it."""

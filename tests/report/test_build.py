@@ -274,3 +274,31 @@ def test_selfpen_section_reads_the_preset_of_either_layout(tmp_path):
         res = write(tmp_path / f"s{i}.json", data)
         text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"selfpen": res}, git=NoGit())
         assert "Ours: preset paper," in text
+
+
+def test_hoi_medians_per_kind_from_the_apps_own_summaries(tmp_path):
+    """Three hand-made fits of two kinds through the app's summarize / by_kind: the medians by hand (rotation 10, 20,
+    40 -> 20; per kind 15 and 40), the cases whose rotation grew counted, a ball's undefined rotation left out; the
+    report shows them as before -> after rows."""
+    from types import SimpleNamespace
+
+    from volsmpl.apps.hoi.cli import by_kind, summarize
+
+    def fit(name, rot, rot0, contact):
+        m = {"collision_pct": 1.0, "contact_cm": contact, "obj_trans_err_cm": 5.0, "obj_rot_err_deg": rot,
+             "scale_err_pct": 0.0, "human_scale_err_pct": 0.0}
+        return SimpleNamespace(name=name, after=m, before={**m, "obj_rot_err_deg": rot0, "contact_cm": 50.0},
+                               ms_per_iter=10.0, total_s=1.0, peak_mem_mb=1.0)
+
+    rs = [fit("cup_a", 10.0, 12.0, 2.0), fit("cup_b", 20.0, 15.0, 4.0), fit("chair_a", 40.0, 30.0, 9.0),
+          fit("ball_a", None, None, 1.0)]
+    kinds = by_kind(rs, lambda n: n.split("_")[0])
+    s = summarize(rs)
+    assert s["obj_rot_err_deg_median"] == 20.0 and s["obj_rot_err_deg_median_before"] == 15.0
+    assert s["contact_cm_median"] == 3.0 and s["obj_rot_err_deg"] == pytest.approx(70 / 3)
+    assert kinds["cup"]["obj_rot_err_deg_median"] == 15.0 and kinds["cup"]["worse_rotation"] == 1
+    assert kinds["chair"]["worse_rotation"] == 1 and kinds["ball"]["obj_rot_err_deg_median"] is None
+    res = write(tmp_path / "h.json", {"summary": {"volsmpl": s}, "by_kind": {"volsmpl": kinds}, "cases": {}})
+    text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"hoi": res}, git=NoGit())
+    assert "| volsmpl | all | 4 | 15.00 -> 20.00 | 50.00 -> 3.00 | 5.00 -> 5.00 | 1.00 -> 1.00 | 2 |" in text
+    assert "| volsmpl | cup | 2 | 13.50 -> 15.00 | 50.00 -> 3.00 |" in text

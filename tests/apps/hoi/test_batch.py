@@ -79,7 +79,10 @@ def test_a_batch_of_cases_fits_each_case_as_alone(kind, two_cases):
         for who in ("human", "object"):
             assert r.__dict__[who]["scale"] == pytest.approx(a.__dict__[who]["scale"], rel=1e-4)
             assert np.allclose(r.__dict__[who]["translation"], a.__dict__[who]["translation"], atol=2e-4)
-            assert np.allclose(r.__dict__[who]["rotation"], a.__dict__[who]["rotation"], atol=2e-4)
+            # 1e-3 (0.06 deg): Adam's normalised steps turn the float32 rounding of a near-zero gradient (another
+            # summation order in a batch) into steps of up to lr = 2e-3 in the 6D rotation; measured: 7e-4 for the
+            # cup against the exact mesh at penetration weight 1e5, 2e-5 with volsmpl, 2e-6 for the chair
+            assert np.allclose(r.__dict__[who]["rotation"], a.__dict__[who]["rotation"], atol=1e-3)
         assert r.after["contact_cm"] == pytest.approx(a.after["contact_cm"], abs=0.05)
         assert r.loss[0] == pytest.approx(a.loss[0], rel=1e-4)
 

@@ -185,6 +185,19 @@ def test_silhouette_zero_on_the_mask_and_positive_off_it():
 
 
 
+def test_silhouette_is_relative_to_the_silhouettes_spread():
+    """By hand: pixels (0, 0) and (20, 0) (spread 10^2), one vertex projected to (10, 5) (125 px^2 from each):
+    (125 + 125) / 100. Shrinking the whole picture (pixels and projected vertices) about the principal point keeps
+    the value: a small object far away is charged as a large one near."""
+    K = torch.tensor([[[100.0, 0, 0], [0, 100, 0], [0, 0, 1]]])
+    one, two = torch.ones(1, 1, dtype=torch.bool), torch.ones(1, 2, dtype=torch.bool)
+    sil = torch.tensor([[[0.0, 0.0], [20.0, 0.0]]])
+    x = torch.tensor([[[0.10, 0.05, 1.0]]])  # (10, 5) px
+    assert float(silhouette_term(x, one, sil, two, K)) == pytest.approx(2.5, rel=1e-5)
+    far = x * torch.tensor([1.0, 1.0, 8.0])  # eight times as deep: projects to (1.25, 0.625)
+    assert float(silhouette_term(far, one, sil / 8, two, K)) == pytest.approx(2.5, rel=1e-5)
+
+
 def test_a_fine_region_keeps_a_fixed_budget_of_triangles_close_to_its_surface():
     """A 20,480-triangle sphere (r 0.11 m) is simplified to the budget; its triangles stay within 2 mm of the sphere
     (analytic), wound outwards; the contact term on them is within 1.5 mm (RMS distance) of the exact distances to
