@@ -29,7 +29,8 @@ from __future__ import annotations
 
 from volsmpl.apps.table import add_common, check_common
 
-from .options import GUIDES, PAPER_SCALE, TUNE_FACTORS, options_of, parse_guides, scales_of
+from .options import (ALONG, GUIDES, MAX_PELVIS_STEP, PAPER_SCALE, PELVIS_STEP, SUPPORT, SUPPORT_DEFAULT,
+                      TUNE_FACTORS, options_of, parse_guides, scales_of)
 
 #: --out of each action when none is given
 DEFAULT_OUT = {"sample": "out/egohmr", "user": "out/egohmr_user", "tune": "out/egohmr", "train": "runs/egohmr",
@@ -72,6 +73,15 @@ def add_parser(sub):
     p.add_argument("--wrt", default="denoised", choices=["denoised", "noisy"], help="pose J is evaluated at")
     p.add_argument("--joints", default="all", choices=["all", "legs"], help="joints the gradient moves")
     p.add_argument("--reduce", default="mean", choices=["mean", "code"], help="J's reduction (see guidance.py)")
+    p.add_argument("--pelvis-step", type=float, default=PELVIS_STEP, metavar="M",
+                   help="metres each guided step moves the pelvis down J's gradient (guidance.py); 0: the regressed "
+                        f"pelvis stays (paper); 0 to {MAX_PELVIS_STEP:g}")
+    p.add_argument("--support", default=SUPPORT_DEFAULT, choices=list(SUPPORT),
+                   help="on: each guided step puts the body's lowest resting point on the scene's support below it "
+                        "(support.py); off: the paper")
+    p.add_argument("--pelvis-along", default="ray", choices=list(ALONG),
+                   help="the guidance moves the pelvis along its camera ray (ray: the keypoints fix its image "
+                        "position, not its depth) or freely in 3D (free); see guidance.py")
     p.add_argument("--encoder-bf16", action="store_true",
                    help="sample/tune: run the learned guides' part encoder (most of a guided step's cost) under "
                         "bfloat16 autocast, both kinds alike: ~1.5x faster per frame on a CPU with AVX512-BF16 or AMX "

@@ -65,6 +65,8 @@ class Guidance:
         steps: guided steps, the last ones (paper 10; the authors' code guides t <= 10, i.e. 11).
         plain_steps: of those, the last ones whose step is `plain_factor * a * grad` without Sigma_t (paper 5).
         plain_factor: 1 (paper) or 0.01 (the authors' code).
+        pelvis: the gradient call also moves the pelvis (guidance.CollisionScore.moves_pelvis), so it is made in
+            every guided step even where scale is 0 (the pose then unguided).
     """
 
     gradient: Callable
@@ -72,12 +74,15 @@ class Guidance:
     steps: int = 10
     plain_steps: int = 5
     plain_factor: float = 1.0
+    pelvis: bool = False
 
     def step(self, x_t: torch.Tensor, x0_hat: torch.Tensor, t: int, var: torch.Tensor) -> torch.Tensor | None:
         """The shift to add to the posterior mean at step t (None when step t is not guided)."""
-        if t >= self.steps or self.scale == 0:
+        if t >= self.steps or (self.scale == 0 and not self.pelvis):
             return None
         g = self.gradient(x_t, x0_hat, t)
+        if self.scale == 0:
+            return None
         if t < self.plain_steps:
             return -self.plain_factor * self.scale * g
         return -self.scale * var * g

@@ -5,12 +5,22 @@ sample: every guide samples the same frames from the same noise; each is scored 
 frame judged without ground truth (status.py; results.json's `flagged` lists the frames not 'ok');
 results.json is rewritten after every guide (a long run stopped early keeps its finished guides). Each frame's
 record holds the recovered body, compact and in the camera frame (bodies.compact_bodies), made from the record's
-pose (so a record reused by --resume gives its body too); --save-meshes writes each as
+pose and pelvis (the guidance moves the pelvis: guidance.py; a record reused by --resume gives its body too); --save-meshes writes each as
 OUT/meshes/<frame>/<guide>_body.ply, and a run first removes the body meshes an earlier run left in OUT.
 A bar per batch and per denoising step shows on a terminal (--quiet: none).
-tune: each learned guide's scale swept over TUNE_FACTORS x the paper's on the val split; the best is the lowest
-collision ratio among the scales whose MPJPE stays within TUNE_MPJPE_SLACK_MM of the unguided sampler's. tune.json
-is rewritten after every guide, its `best` holding the guides finished so far (`complete` false until the end).
+tune: each guide's scale swept over TUNE_FACTORS x the paper's on the val split (factor 0: the pose unguided, the
+pelvis moved by --pelvis-step and --support alone), at the given --pelvis-step and --support; the best is the
+lowest collision ratio among the scales whose MPJPE minus the unguided sampler's, paired over the same frames, has
+the upper end of its 95 % bootstrap interval (evaluate.paired_interval) within TUNE_MPJPE_SLACK_MM (ties: the lower
+MPJPE). tune.json is rewritten after every guide, its `best` holding the guides finished so far (`complete` false
+until the end). sample reports the same interval for each guide against 'none' (summary.<guide>.mpjpe_diff_mm,
+mpjpe_diff_ci95_mm).
+
+Why an interval, at 1 mm: with the mean within 2 mm the paper's scale (factor 1, pose-only guidance) passed on 16 val
+frames (MPJPE -0.03 mm) and then raised it by 2.8 mm on the 200 test frames (docs/egohmr/results.json); with the
+mean within 1 mm, 3x the paper's scale would pass on 64 val frames (VolumetricSMPL +0.77 mm, 95 % interval [+0.15,
++1.53]; 'mesh' +0.65 [+0.11, +1.38]) for at most 11 % fewer penetrating points than the pose unguided (`volsmpl
+egohmr tune --split val --frames 64 --pelvis-step 0.02 --pelvis-along free`).
 """
 from __future__ import annotations
 
@@ -22,7 +32,7 @@ import torch
 
 from .user_run import run_user_frame
 
-TUNE_MPJPE_SLACK_MM = 2.0
+TUNE_MPJPE_SLACK_MM = 1.0
 
 
 def _setup(args, split: str):
@@ -74,7 +84,7 @@ def run_sample(args, ckpts: dict) -> int:
     from volsmpl.report import paper
 
     from .bodies import FRAME_TABLE, clear_meshes, compact_bodies, write_body_mesh
-    from .evaluate import max_batch, sample_frames, summarize
+    from .evaluate import max_batch, paired_interval, sample_frames, summarize
     from .figures import frame_figure
     from .options import options_of, parse_guides, scales_of
     from .pose import pose_body_finite
@@ -87,7 +97,7 @@ def run_sample(args, ckpts: dict) -> int:
     body, net, meta, frames, prep, scenes = _setup(args, args.split)
     vols = guide_volumes(args, guides, ckpts, body.v_template.device)
     store = CaseRecords(out, "egohmr", resume=args.resume)
-    summary, records, options, batches = {}, {}, {}, {}
+    summary, records, options, batches, per_frame = {}, {}, {}, {}, {}
     # the no-diffusion baseline: the regressor's own pose, scored by the same tests (not a guide: no row in Table 4)
     reg = summarize(sample_frames(net, body, frames, prep, batch=args.batch, scenes=scenes, poses=prep["pose_reg"],
                                   quiet=args.quiet, desc="egohmr regressor"))
@@ -120,25 +130,35 @@ def run_sample(args, ckpts: dict) -> int:
                 "frame_names": [f.name for f in frames], "no_max_batch": args.no_max_batch}
         done, reused = store.get_or_make(f"guide_{g}", spec, vol, make)
         s = done["summary"]
+        per_frame[g] = done["records"]
+        if g != "none" and "none" in per_frame:   # the paired MPJPE difference to the unguided sampler, same frames
+            s["mpjpe_diff_mm"], *ci = paired_interval(done["records"], per_frame["none"])
+            s["mpjpe_diff_ci95_mm"] = ci
         if done["max_batch"] is not None:
             batches[g] = done["max_batch"]
         summary[g], options[g] = s, asdict(opts)
-        records[g] = [{k: v for k, v in r.items() if k != "pose"} for r in done["records"]]
+        records[g] = [{k: v for k, v in r.items() if k not in ("pose", "pelvis")} for r in done["records"]]
         print(f"{g:8s} a={scales[g]:<6g} MPJPE {s['mpjpe_mm']:.1f} mm (vis. {s['mpjpe_visible_mm']:.1f}, invis. "
-              f"{s['mpjpe_invisible_mm']:.1f})  PA {s['pa_mpjpe_mm']:.1f}  collision {s['collision_ratio']:.4f}  "
+              f"{s['mpjpe_invisible_mm']:.1f})  PA {s['pa_mpjpe_mm']:.1f}  pelvis {s['pelvis_err_mm']:.0f}  "
+              f"collision {s['collision_ratio']:.4f}  "
               f"contact {s['contact_pct']:.0f} %  {s['s_per_frame']:.3f} s/frame"
               + (f"  max batch {s['max_batch']} in {args.budget_mb:g} MB" if "max_batch" in s else "")
               + ("  (reused)" if reused else ""))
+        if "mpjpe_diff_mm" in s:
+            print(f"         MPJPE - unguided {s['mpjpe_diff_mm']:+.2f} mm, 95 % paired bootstrap "
+                  f"[{s['mpjpe_diff_ci95_mm'][0]:+.2f}, {s['mpjpe_diff_ci95_mm'][1]:+.2f}]")
         poses = torch.tensor([rec["pose"] for rec in done["records"]], dtype=torch.float32, device=prep["kp"].device)
-        bodies, verts = compact_bodies(body, prep["betas_hat"], poses, prep["pelvis_hat"])
+        pelvis = torch.tensor([rec["pelvis"] for rec in done["records"]], dtype=torch.float32, device=poses.device)
+        bodies, verts = compact_bodies(body, prep["betas_hat"], poses, pelvis)
         for r, rec, b, v, f in zip(records[g], done["records"], bodies, verts, frames):
-            r["_pose"], r["body"] = rec["pose"], b
+            r["_pose"], r["_pelvis"], r["body"] = rec["pose"], rec["pelvis"], b
             if args.save_meshes and v is not None:
                 r["mesh"] = write_body_mesh(out, f.name, g, v, body.faces)
         extra = {"options": options, "regressor": reg, "max_batch": batches}
         if tuning is not None:
             extra["tuning"] = tuning
-        cases = {k: [{kk: vv for kk, vv in r.items() if kk != "_pose"} for r in v] for k, v in records.items()}
+        cases = {k: [{kk: vv for kk, vv in r.items() if kk not in ("_pose", "_pelvis")} for r in v]
+                 for k, v in records.items()}
         flagged = flag_cases(cases, "frame", good=GOOD)
         result = envelope("egohmr", config, summary, paper.rows("egohmr"), cases, machine_info(args.device),
                           flagged=flagged, **extra)
@@ -156,7 +176,8 @@ def run_sample(args, ckpts: dict) -> int:
             samples, inside = {}, {}
             for g in guides:
                 x = torch.tensor(records[g][i]["_pose"], device=dev)[None]
-                v = pose_body_finite(body, prep["betas_hat"][i:i + 1], x, prep["pelvis_hat"][i:i + 1]).vertices
+                p = torch.tensor(records[g][i]["_pelvis"], device=dev)[None]
+                v = pose_body_finite(body, prep["betas_hat"][i:i + 1], x, p).vertices
                 if not torch.isfinite(v).all():
                     continue                                   # a diverged sample (its status says so): no panel
                 pts = prep["guide_points"][i]
@@ -181,7 +202,7 @@ def run_tune(args, ckpts: dict) -> int:
 
     from volsmpl.apps.table import write_results
 
-    from .evaluate import sample_frames, summarize
+    from .evaluate import paired_interval, sample_frames, summarize
     from .options import PAPER_SCALE, factors_of, options_of, parse_guides
 
     guides = [g for g in parse_guides(args.model) if g != "none"]
@@ -191,17 +212,21 @@ def run_tune(args, ckpts: dict) -> int:
         print("tune: tuning runs on the val split (the test split is for reporting only)")
     body, net, meta, frames, prep, scenes = _setup(args, split)
     vols = guide_volumes(args, guides, ckpts, body.v_template.device)
-    base = summarize(sample_frames(net, body, frames, prep, None, None, args.batch, args.seed, scenes,
-                                   quiet=args.quiet, desc="egohmr tune none"))
+    base_recs = sample_frames(net, body, frames, prep, None, None, args.batch, args.seed, scenes, quiet=args.quiet,
+                              desc="egohmr tune none")
+    base = summarize(base_recs)
     print(f"{len(frames)} {split} frames; unguided first")
     rows = [{"guide": "none", "scale": 0.0, **base}]
-    print(f"none     MPJPE {base['mpjpe_mm']:.1f}  collision {base['collision_ratio']:.4f}")
+    print(f"none     MPJPE {base['mpjpe_mm']:.2f}  pelvis {base['pelvis_err_mm']:.1f}  collision "
+          f"{base['collision_ratio']:.5f}  contact {base['contact_pct']:.0f} %")
     best = {}
 
     def save(complete: bool):
-        doc = {"split": split, "frames": len(frames), "rule": f"lowest collision ratio with MPJPE within "
-               f"{TUNE_MPJPE_SLACK_MM} mm of the unguided sampler's", "factors": factors,
-               "paper_scales": PAPER_SCALE, "encoder_bf16": args.encoder_bf16, "rows": rows, "best": best,
+        doc = {"split": split, "frames": len(frames), "rule": f"lowest collision ratio among the scales whose "
+               f"MPJPE minus the unguided sampler's (paired, per frame) has its 95 % bootstrap upper bound within "
+               f"{TUNE_MPJPE_SLACK_MM} mm", "factors": factors,
+               "paper_scales": PAPER_SCALE, "encoder_bf16": args.encoder_bf16, "pelvis_step": args.pelvis_step,
+               "support": args.support, "rows": rows, "best": best,
                "complete": complete, "config": run_config(args, guides, ckpts, {}, len(frames), split),
                "meta": machine_info(args.device)}
         return write_results(args.out, doc, "tune.json")
@@ -211,12 +236,17 @@ def run_tune(args, ckpts: dict) -> int:
         cands = []
         for f in factors:
             a = PAPER_SCALE[g] * f
-            s = summarize(sample_frames(net, body, frames, prep, vol, options_of(args, a), args.batch, args.seed,
-                                        scenes, quiet=args.quiet, desc=f"egohmr tune {g} a={a:g}"))
+            recs = sample_frames(net, body, frames, prep, vol, options_of(args, a), args.batch, args.seed, scenes,
+                                 quiet=args.quiet, desc=f"egohmr tune {g} a={a:g}")
+            s = summarize(recs)
+            s["mpjpe_diff_mm"], *ci = paired_interval(recs, base_recs)
+            s["mpjpe_diff_ci95_mm"] = ci
             rows.append({"guide": g, "scale": a, **s})
             cands.append((a, s))
-            print(f"{g:8s} a={a:<8g} MPJPE {s['mpjpe_mm']:.1f}  collision {s['collision_ratio']:.4f}")
-        ok = [(a, s) for a, s in cands if s["mpjpe_mm"] <= base["mpjpe_mm"] + TUNE_MPJPE_SLACK_MM]
+            print(f"{g:8s} a={a:<8g} MPJPE {s['mpjpe_mm']:.2f} ({s['mpjpe_diff_mm']:+.2f}, 95 % [{ci[0]:+.2f}, "
+                  f"{ci[1]:+.2f}])  pelvis {s['pelvis_err_mm']:.1f}  collision {s['collision_ratio']:.5f}  contact "
+                  f"{s['contact_pct']:.0f} %")
+        ok = [(a, s) for a, s in cands if s["mpjpe_diff_ci95_mm"][1] <= TUNE_MPJPE_SLACK_MM]
         best[g] = min(ok or cands, key=lambda c: (c[1]["collision_ratio"], c[1]["mpjpe_mm"]))[0]
         save(False)   # after every guide: a run stopped early keeps the finished guides' best scales
     path = save(True)
@@ -228,12 +258,14 @@ def format_table(summary: dict) -> str:
     """Our rows beside the paper's Table 4."""
     from volsmpl.report import paper
     f = lambda x, p=1: "-" if x is None else f"{x:.{p}f}"  # noqa: E731
-    head = f"{'':18s} {'batch':>6s} {'s/frame':>8s} {'coll.':>7s} {'cont. %':>8s} {'MPJPE':>7s} {'vis.':>6s} {'invis.':>7s} {'PA':>6s}"
+    head = (f"{'':18s} {'batch':>6s} {'s/frame':>8s} {'coll.':>7s} {'cont. %':>8s} {'MPJPE':>7s} {'vis.':>6s} "
+            f"{'invis.':>7s} {'PA':>6s} {'pelvis':>7s}")
     lines = [head, "-" * len(head)]
     for g, s in summary.items():
         lines.append(f"{'ours ' + g:18s} {str(s.get('max_batch', '-')):>6s} {f(s['s_per_frame'], 3):>8s} "
                      f"{f(s['collision_ratio'], 4):>7s} {f(s['contact_pct'], 0):>8s} {f(s['mpjpe_mm']):>7s} "
-                     f"{f(s['mpjpe_visible_mm']):>6s} {f(s['mpjpe_invisible_mm']):>7s} {f(s['pa_mpjpe_mm']):>6s}")
+                     f"{f(s['mpjpe_visible_mm']):>6s} {f(s['mpjpe_invisible_mm']):>7s} {f(s['pa_mpjpe_mm']):>6s} "
+                     f"{f(s.get('pelvis_err_mm'), 0):>7s}")
     for key, row in paper.rows("egohmr").items():
         lines.append(f"{'paper ' + key:18s} {row['batch']:>6d} {row['s_per_frame']:>8.2f} {row['collision']:>7.3f} "
                      f"{row['contact_pct']:>8.0f} {row['mpjpe_mm']:>7.2f} {row['mpjpe_vis_mm']:>6.1f} "

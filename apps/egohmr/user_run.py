@@ -4,15 +4,18 @@ The frame file and the scene are read and checked first (userframe.py; user_chec
 scene: its size against a person's, the up axis from its floor, the camera against the image, the camera's place in
 the scene); only then are the network and the guides loaded. The network regresses the pelvis; the scene's points
 in the 2 m cube around it are taken at --spacing metres (user_scene.py: only that part of a scan of any size is
-sampled), and the network's and the guidance's fixed budgets drawn from them. Each guide's sample is scored by the
-exact tests on those points (collision ratio, contact; no ground truth, so no joint errors) and judged (status.py).
+sampled), and the network's and the guidance's fixed budgets drawn from them; the support term (--support) reads
+the world's up from 'world_to_camera', else from the scene's floor (off, with a warning, where neither gives it).
+Each guide's sample is scored by the exact tests on those points (collision ratio, contact; no ground truth, so no
+joint errors) and judged (status.py).
 
 What it writes to OUT (results.json after every guide, with the warnings the checks printed):
 
 - results.json: per guide, the frame's record with its measures, status, `body` (bodies.py: params and joints, in
   the scene file's units and axes; the camera frame where the frame file gives no 'world_to_camera'; None for a
-  diverged sample) and `mesh` (its file, relative to OUT); config.spacing and config.cube_points say how densely
-  the scene was taken;
+  diverged sample), `mesh` (its file, relative to OUT) and `pelvis` (the body's pelvis, camera frame, metres: the
+  regressed one, results.json's `pelvis`, where the guidance did not move it); config.spacing and
+  config.cube_points say how densely the scene was taken;
 - meshes/<frame>/<guide>_body.ply: each guide's recovered body in the scene file's units and axes, overlaying it;
 - frame_<name>.png (unless --render 0): per guide the camera view with the input keypoints by their confidence, the
   body and the scene points near it (those inside it in red), and a side view (figures.user_figure).
@@ -40,6 +43,14 @@ def up_rotation(frame, up=None) -> np.ndarray:
         return np.diag([1.0, -1.0, -1.0])
     vx = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
     return np.eye(3) + vx + vx @ vx / (1.0 + c)
+
+
+def camera_up(frame, up=None) -> np.ndarray | None:
+    """The world's up direction in the camera frame (the support term's up): the second column of the rotation of
+    'world_to_camera'; without it, the floor's up direction `up` (camera frame) the scene checks found, else None."""
+    if frame.has_world:
+        return np.asarray(frame.world_to_camera, np.float64)[:3, 1]
+    return None if up is None else np.asarray(up, np.float64) / np.linalg.norm(up)
 
 
 def run_user_frame(args, ckpts: dict) -> int:
@@ -93,6 +104,18 @@ def run_user_frame(args, ckpts: dict) -> int:
     d = {"c_kp": c_kp, "pelvis_hat": pelvis, "betas_hat": betas,
          "scene_cond": torch.as_tensor(cond_pts, dtype=torch.float32, device=dev)[None],
          "guide_points": torch.as_tensor(guide_pts, dtype=torch.float32, device=dev)[None]}
+    up_cam = camera_up(frame, up)
+    support = args.support
+    if up_cam is None:
+        if support != "off" and any(g != "none" for g in guides):
+            warn("egohmr", f"--support {support}: the frame file gives no 'world_to_camera' and the scene shows no "
+                           f"clear floor, so the up direction is unknown: the support term is off", warnings)
+        support = "off"
+    else:
+        from .support import support_mask
+
+        d["up"] = torch.as_tensor(up_cam, dtype=torch.float32, device=dev)[None]
+        d["support"] = torch.as_tensor(support_mask(guide_pts, up_cam), device=dev)[None]
     tree = cKDTree(guide_pts)
     faces = torch.as_tensor(body.faces, device=dev)
     summary, records, samples = {}, {}, {}
@@ -104,11 +127,13 @@ def run_user_frame(args, ckpts: dict) -> int:
     clear_meshes(out)
     for g in progress(guides, "egohmr guides", quiet=args.quiet, unit="guide"):
         t0 = time.perf_counter()
-        x, _ = draw(net, body, d, vols[g], options_of(args, scales[g]), seed=args.seed, quiet=args.quiet,
-                    desc=f"egohmr {g}: denoising")
+        opts = options_of(args, scales[g])
+        opts.support = support
+        x, placed, _ = draw(net, body, d, vols[g], opts, seed=args.seed, quiet=args.quiet,
+                            desc=f"egohmr {g}: denoising")
         secs = time.perf_counter() - t0
         with torch.no_grad():
-            posed = pose_body_finite(body, betas, x, pelvis)
+            posed = pose_body_finite(body, betas, x, placed)
         inside = inside_masks(posed.vertices, faces, d["guide_points"])
         checks = measure(x, posed.joints[:, :24], posed.vertices, faces, kp, d["guide_points"], inside)[0]
         status, why = judge(checks)
@@ -119,11 +144,11 @@ def run_user_frame(args, ckpts: dict) -> int:
         summary[g] = {"n_frames": 1, "collision_ratio": float(inside.mean()) if finite else float("nan"),
                       "contact_pct": 100.0 * float((near <= 0.02).any() or inside.any()), "s_per_frame": secs,
                       "scale": scales[g]}
-        bodies, world = world_bodies(body, frame, betas, x, pelvis, args.units, args.up)
+        bodies, world = world_bodies(body, frame, betas, x, placed, args.units, args.up)
         mesh = (write_body_mesh(out, frame.name, g, world[0], body.faces, args.units, args.up)
                 if bodies[0] is not None else None)
         records[g] = [{"name": frame.name, **summary[g], **checks, "status": status, "status_why": why,
-                       "body": bodies[0], "mesh": mesh}]
+                       "body": bodies[0], "mesh": mesh, "pelvis": placed[0].tolist()}]
         if finite:
             samples[g] = (v, posed.joints[0, :24].cpu().numpy(), inside)
         print(f"{g:8s} collision {summary[g]['collision_ratio']:.4f}  contact {summary[g]['contact_pct']:.0f} %  "
@@ -141,4 +166,4 @@ def run_user_frame(args, ckpts: dict) -> int:
     return 0
 
 
-__all__ = ["run_user_frame", "up_rotation"]
+__all__ = ["run_user_frame", "up_rotation", "camera_up"]

@@ -218,8 +218,8 @@ def test_numbers_out_of_range_are_refused(argv, said, capsys, tmp_path):
 def test_factors_steps_and_tuned_files_are_checked(files, capsys, tmp_path):
     out = ["--out", str(tmp_path / "o")]
     rc, err = run(["tune", "--factors", "1,-2", *out], capsys)
-    assert rc == 2 and err.endswith("--factors -2: give a finite number > 0 (factors of the paper's scales, "
-                                    "comma-separated)")
+    assert rc == 2 and err.endswith("--factors -2: give a finite number >= 0 (factors of the paper's scales, "
+                                    "comma-separated; 0: the pose unguided)")
     assert "--steps 0: give a finite number >= 1" in run(["train", "--steps", "0", *out], capsys)[1]
     no_best = files("rows.json", {"rows": []})
     rc, err = run(["sample", "--tuned", no_best, *out], capsys)
