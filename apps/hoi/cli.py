@@ -102,8 +102,6 @@ def select_cases(cases: list, index: dict, split: str, which: str) -> list:
 #: the measures of a fit summarised per back-end and per kind of case (mean and median, before and after)
 MEASURES = ("collision_pct", "contact_cm", "obj_trans_err_cm", "obj_rot_err_deg", "scale_err_pct",
             "human_scale_err_pct")
-#: the handheld categories whose fits must stay out of the body (the flag `small_inside`)
-SMALL = ("cup", "phone", "bottle")
 
 
 def _values(results: list, key: str, when: str) -> list:
