@@ -160,10 +160,10 @@ def sample_frames(net, body, frames, prep: dict, volume=None, opts: GuideOptions
 
 
 def summarize(recs: list[dict]) -> dict:
-    """A guide's row: joint-weighted MPJPE (all / visible / invisible), PA-MPJPE, pelvis error (mm), collision
-    ratio, contact %, seconds per frame; means over frames. n_diverged: the frames whose sample holds NaN or Inf
-    (status 'diverged'); where there is one, the row's errors, collision ratio and contact are NaN (a mean without
-    them would hide it)."""
+    """A guide's row: joint-weighted MPJPE (all / visible / invisible), PA-MPJPE, pelvis error (mm), the joints'
+    reprojection error (status.reprojection_error), collision ratio, contact %, seconds per frame; means over
+    frames. n_diverged: the frames whose sample holds NaN or Inf (status 'diverged'); where there is one, the row's
+    errors, collision ratio and contact are NaN (a mean without them would hide it)."""
     if not recs:
         return {"n_frames": 0}
     arr = lambda k: np.array([r[k] for r in recs], dtype=np.float64)  # noqa: E731
@@ -171,13 +171,14 @@ def summarize(recs: list[dict]) -> dict:
     row = {"n_frames": len(recs), **joint_means(errs),
            "pa_mpjpe_mm": float(arr("pa_mpjpe_mm").mean()),
            "pelvis_err_mm": float(np.mean([r.get("pelvis_err_mm", np.nan) for r in recs])),
+           "reproj_err": float(np.mean([r.get("reproj_err", np.nan) for r in recs])),
            "collision_ratio": float(arr("collision_ratio").mean()),
            "contact_pct": 100.0 * float(np.mean([r["contact"] for r in recs])),
            "s_per_frame": float(arr("s_per_frame").mean())}
     row["n_diverged"] = sum(not r.get("finite", True) for r in recs)
     if row["n_diverged"]:
         row.update({k: float("nan") for k in ("mpjpe_mm", "mpjpe_visible_mm", "mpjpe_invisible_mm", "pa_mpjpe_mm",
-                                               "pelvis_err_mm", "collision_ratio", "contact_pct")})
+                                               "pelvis_err_mm", "reproj_err", "collision_ratio", "contact_pct")})
     return row
 
 

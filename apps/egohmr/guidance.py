@@ -37,7 +37,11 @@ The keypoints fix the pelvis's image position; its depth is what they leave unce
 pelvis steps of 1 cm ('mesh' guide, first 64 val frames, `volsmpl egohmr tune --split val --frames 64 --model mesh
 --factors 0 --pelvis-step 0.01 --pelvis-along A`), 'ray' / 'free' take the collision ratio from 0.00424 to 0.00071 /
 0.00104, contact from 75 to 100 / 100 %, the pelvis error from 107 to 100 / 103 mm and the mean reprojection error
-of the joints (status.py) from 0.0432 to 0.0461 / 0.0536.
+of the joints (status.py) from 0.0432 to 0.0461 / 0.0536; on all 200 val frames (`--frames` left out) collision
+0.00579 -> 0.00211 / 0.00148, contact 70 -> 96 / 96 %, pelvis error 122 -> 124 / 127 mm, reprojection 0.0394 ->
+0.0440 / 0.0553. 'ray' keeps the bodies consistent with the keypoints; it resolves less of the penetration of
+bodies leaning on a wall (lateral to the ray: collision 0.0178 -> 0.0047 / 0.0011, pelvis error 134 -> 169 / 137 mm,
+30 frames).
 J's own gradient cannot lift deeply sunk feet: for points nearer the top of a thin part (toes 3 cm into a floor)
 it points down, deeper (tests/apps/egohmr/test_support.py); the support term's inside test lifts them.
 """

@@ -2,12 +2,12 @@
 user_run.py.
 
 sample: every guide samples the same frames from the same noise; each is scored by the same exact tests and each
-frame judged without ground truth (status.py; results.json's `flagged` lists the frames not 'ok');
-results.json is rewritten after every guide (a long run stopped early keeps its finished guides). Each frame's
-record holds the recovered body, compact and in the camera frame (bodies.compact_bodies), made from the record's
-pose and pelvis (the guidance moves the pelvis: guidance.py; a record reused by --resume gives its body too); --save-meshes writes each as
-OUT/meshes/<frame>/<guide>_body.ply, and a run first removes the body meshes an earlier run left in OUT.
-A bar per batch and per denoising step shows on a terminal (--quiet: none).
+frame judged without ground truth (status.py; results.json's `flagged` lists the frames not 'ok'); results.json is
+rewritten after every guide (a long run stopped early keeps its finished guides). Each frame's record holds the
+recovered body, compact and in the camera frame (bodies.compact_bodies), made from the record's pose and pelvis (the
+guidance moves the pelvis: guidance.py; a record reused by --resume gives its body too); --save-meshes writes each
+as OUT/meshes/<frame>/<guide>_body.ply, and a run first removes the body meshes an earlier run left in OUT. A bar
+per batch and per denoising step shows on a terminal (--quiet: none).
 tune: each guide's scale swept over TUNE_FACTORS x the paper's on the val split (factor 0: the pose unguided, the
 pelvis moved by --pelvis-step and --support alone), at the given --pelvis-step and --support; the best is the
 lowest collision ratio among the scales whose MPJPE minus the unguided sampler's, paired over the same frames, has
@@ -139,7 +139,8 @@ def run_sample(args, ckpts: dict) -> int:
         summary[g], options[g] = s, asdict(opts)
         records[g] = [{k: v for k, v in r.items() if k not in ("pose", "pelvis")} for r in done["records"]]
         print(f"{g:8s} a={scales[g]:<6g} MPJPE {s['mpjpe_mm']:.1f} mm (vis. {s['mpjpe_visible_mm']:.1f}, invis. "
-              f"{s['mpjpe_invisible_mm']:.1f})  PA {s['pa_mpjpe_mm']:.1f}  pelvis {s['pelvis_err_mm']:.0f}  "
+              f"{s['mpjpe_invisible_mm']:.1f})  PA {s['pa_mpjpe_mm']:.1f}  pelvis {s['pelvis_err_mm']:.0f}  reproj. "
+              f"{s['reproj_err']:.3f}  "
               f"collision {s['collision_ratio']:.4f}  "
               f"contact {s['contact_pct']:.0f} %  {s['s_per_frame']:.3f} s/frame"
               + (f"  max batch {s['max_batch']} in {args.budget_mb:g} MB" if "max_batch" in s else "")
@@ -217,8 +218,8 @@ def run_tune(args, ckpts: dict) -> int:
     base = summarize(base_recs)
     print(f"{len(frames)} {split} frames; unguided first")
     rows = [{"guide": "none", "scale": 0.0, **base}]
-    print(f"none     MPJPE {base['mpjpe_mm']:.2f}  pelvis {base['pelvis_err_mm']:.1f}  collision "
-          f"{base['collision_ratio']:.5f}  contact {base['contact_pct']:.0f} %")
+    print(f"none     MPJPE {base['mpjpe_mm']:.2f}  pelvis {base['pelvis_err_mm']:.1f}  reproj. "
+          f"{base['reproj_err']:.4f}  collision {base['collision_ratio']:.5f}  contact {base['contact_pct']:.0f} %")
     best = {}
 
     def save(complete: bool):
@@ -244,8 +245,8 @@ def run_tune(args, ckpts: dict) -> int:
             rows.append({"guide": g, "scale": a, **s})
             cands.append((a, s))
             print(f"{g:8s} a={a:<8g} MPJPE {s['mpjpe_mm']:.2f} ({s['mpjpe_diff_mm']:+.2f}, 95 % [{ci[0]:+.2f}, "
-                  f"{ci[1]:+.2f}])  pelvis {s['pelvis_err_mm']:.1f}  collision {s['collision_ratio']:.5f}  contact "
-                  f"{s['contact_pct']:.0f} %")
+                  f"{ci[1]:+.2f}])  pelvis {s['pelvis_err_mm']:.1f}  reproj. {s['reproj_err']:.4f}  collision "
+                  f"{s['collision_ratio']:.5f}  contact {s['contact_pct']:.0f} %")
         ok = [(a, s) for a, s in cands if s["mpjpe_diff_ci95_mm"][1] <= TUNE_MPJPE_SLACK_MM]
         best[g] = min(ok or cands, key=lambda c: (c[1]["collision_ratio"], c[1]["mpjpe_mm"]))[0]
         save(False)   # after every guide: a run stopped early keeps the finished guides' best scales

@@ -20,15 +20,15 @@ Why: the unguided samples touch the scene (a vertex within 2 cm) in 70 % of the 
 touches its support; the regressed pelvis is off by 12 cm on average, 5 cm of it along up (val split, 200 frames,
 the shipped network). Pose-only guidance cannot close a gap of the whole body. Measured with the 'mesh' guide, the
 pose unguided and free pelvis steps of 1 cm (guidance.py; `volsmpl egohmr tune --split val --model mesh --factors 0
---pelvis-step 0.01 --pelvis-along free`, BAND and ABOVE set here), 200 val frames, ABOVE 0.05: the lowest 3 cm (BAND 0.03) take the
-collision ratio from 0.00579 to 0.00182 and contact from 70 to 96 % with the pelvis error from 122 to 127 mm;
-every vertex (BAND None) takes the collision ratio to 0.00018 (seated bodies rest on their seats) but the pelvis
-error to 137 mm (a sampled pose whose thighs or hands overlap furniture is lifted by it), so BAND is 0.03.
+--pelvis-step 0.01 --pelvis-along free`, BAND and ABOVE set here), 200 val frames, ABOVE 0.05: the lowest 3 cm (BAND
+0.03) take the collision ratio from 0.00579 to 0.00182 and contact from 70 to 96 % with the pelvis error from 122 to
+127 mm; every vertex (BAND None) takes the collision ratio to 0.00018 (seated bodies rest on their seats) but the
+pelvis error to 137 mm (a sampled pose whose thighs or hands overlap furniture is lifted by it), so BAND is 0.03.
 ABOVE 0.05 / 0.10 / 0.15 differ by less than the frames' spread (first 64 val frames: collision 0.00121 / 0.00104 /
-0.00102 against 0.00424 unguided, pelvis error 103-104 mm against 107). On the val split's 200 ground-truth bodies g lies within 2 cm for every body with BAND
-None; with BAND 0.03 the 30 seated ones, whose feet hang 2.6-12 cm above the floor, get g > 2 cm: the guidance
-therefore pulls a body down only where it penetrates nothing (guidance.py), so it does not sink a seated body into
-its seat.
+0.00102 against 0.00424 unguided, pelvis error 103-104 mm against 107). On the val split's 200 ground-truth bodies g
+lies within 2 cm for every body with BAND None; with BAND 0.03 the 30 seated ones, whose feet hang 2.6-12 cm above
+the floor, get g > 2 cm: the guidance therefore pulls a body down only where it penetrates nothing (guidance.py), so
+it does not sink a seated body into its seat.
 """
 from __future__ import annotations
 
