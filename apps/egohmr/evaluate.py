@@ -182,6 +182,15 @@ def summarize(recs: list[dict]) -> dict:
     return row
 
 
+def by_activity(recs: list[dict]) -> dict:
+    """`summarize`'s MPJPE, PA-MPJPE, pelvis error, collision ratio and contact per activity of the frames
+    ({activity: row}, sorted by name): where the sampler's error lies (seated or leaning bodies sampled upright)."""
+    keep = ("n_frames", "mpjpe_mm", "pa_mpjpe_mm", "pelvis_err_mm", "collision_ratio", "contact_pct")
+    acts = sorted({r["activity"] for r in recs})
+    return {a: {k: v for k, v in summarize([r for r in recs if r["activity"] == a]).items() if k in keep}
+            for a in acts}
+
+
 def paired_interval(recs: list[dict], base: list[dict], key: str = "mpjpe_mm", n: int = 2000,
                     seed: int = 0) -> tuple[float, float, float]:
     """Mean of the per-frame differences recs[key] - base[key] (the same frames, in order) and its 95 % bootstrap
@@ -254,5 +263,5 @@ def max_batch(net, body, frame_prep: dict, volume, opts: GuideOptions, budget_mb
             "capped": lo >= cap}
 
 
-__all__ = ["GuideOptions", "prepare", "guide_score", "draw", "sample_frames", "summarize", "paired_interval",
+__all__ = ["GuideOptions", "prepare", "guide_score", "draw", "sample_frames", "summarize", "by_activity", "paired_interval",
            "regressor_and_sample_errors", "max_batch", "GUIDE_POINTS", "GUIDE_CUBE", "MIN_SCENE_POINTS"]

@@ -84,7 +84,7 @@ def run_sample(args, ckpts: dict) -> int:
     from volsmpl.report import paper
 
     from .bodies import FRAME_TABLE, clear_meshes, compact_bodies, write_body_mesh
-    from .evaluate import max_batch, paired_interval, sample_frames, summarize
+    from .evaluate import by_activity, max_batch, paired_interval, sample_frames, summarize
     from .figures import frame_figure
     from .options import options_of, parse_guides, scales_of
     from .pose import pose_body_finite
@@ -97,7 +97,7 @@ def run_sample(args, ckpts: dict) -> int:
     body, net, meta, frames, prep, scenes = _setup(args, args.split)
     vols = guide_volumes(args, guides, ckpts, body.v_template.device)
     store = CaseRecords(out, "egohmr", resume=args.resume)
-    summary, records, options, batches, per_frame = {}, {}, {}, {}, {}
+    summary, records, options, batches, per_frame, activities = {}, {}, {}, {}, {}, {}
     # the no-diffusion baseline: the regressor's own pose, scored by the same tests (not a guide: no row in Table 4)
     reg = summarize(sample_frames(net, body, frames, prep, batch=args.batch, scenes=scenes, poses=prep["pose_reg"],
                                   quiet=args.quiet, desc="egohmr regressor"))
@@ -136,7 +136,7 @@ def run_sample(args, ckpts: dict) -> int:
             s["mpjpe_diff_ci95_mm"] = ci
         if done["max_batch"] is not None:
             batches[g] = done["max_batch"]
-        summary[g], options[g] = s, asdict(opts)
+        summary[g], options[g], activities[g] = s, asdict(opts), by_activity(done["records"])
         records[g] = [{k: v for k, v in r.items() if k not in ("pose", "pelvis")} for r in done["records"]]
         print(f"{g:8s} a={scales[g]:<6g} MPJPE {s['mpjpe_mm']:.1f} mm (vis. {s['mpjpe_visible_mm']:.1f}, invis. "
               f"{s['mpjpe_invisible_mm']:.1f})  PA {s['pa_mpjpe_mm']:.1f}  pelvis {s['pelvis_err_mm']:.0f}  reproj. "
@@ -155,7 +155,7 @@ def run_sample(args, ckpts: dict) -> int:
             r["_pose"], r["_pelvis"], r["body"] = rec["pose"], rec["pelvis"], b
             if args.save_meshes and v is not None:
                 r["mesh"] = write_body_mesh(out, f.name, g, v, body.faces)
-        extra = {"options": options, "regressor": reg, "max_batch": batches}
+        extra = {"options": options, "regressor": reg, "max_batch": batches, "by_activity": activities}
         if tuning is not None:
             extra["tuning"] = tuning
         cases = {k: [{kk: vv for kk, vv in r.items() if kk not in ("_pose", "_pelvis")} for r in v]
@@ -193,6 +193,7 @@ def run_sample(args, ckpts: dict) -> int:
     if note:
         print(note)
     print(format_table(summary))
+    print(format_activities(activities))
     print_flagged(flagged)
     print(f"wrote {out / 'results.json'}")
     return 0
@@ -274,4 +275,19 @@ def format_table(summary: dict) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["run_sample", "run_tune", "run_user_frame", "format_table", "guide_volumes", "run_config"]
+def format_activities(activities: dict) -> str:
+    """MPJPE (mm) and contact (%) per activity (rows) and guide (columns): `by_activity` of each guide."""
+    guides = list(activities)
+    acts = sorted({a for rows in activities.values() for a in rows})
+    head = f"{'activity':16s} {'frames':>6s} " + " ".join(f"{g + ' MPJPE / cont.':>22s}" for g in guides)
+    lines = [head, "-" * len(head)]
+    for a in acts:
+        first = next(rows[a] for rows in activities.values() if a in rows)
+        cells = [f"{activities[g][a]['mpjpe_mm']:>14.1f} / {activities[g][a]['contact_pct']:>5.0f}" if a in activities[g]
+                 else f"{'-':>22s}" for g in guides]
+        lines.append(f"{a:16s} {first['n_frames']:>6d} " + " ".join(cells))
+    return "\n".join(lines)
+
+
+__all__ = ["run_sample", "run_tune", "run_user_frame", "format_table", "format_activities", "guide_volumes",
+           "run_config"]

@@ -268,3 +268,23 @@ def test_a_diverged_sample_is_flagged_not_fatal(body, frames, tiny_ckpt):
     row = summarize(recs)                                 # a row with a diverged frame says so, loudly
     assert row["n_diverged"] == 1 and np.isnan(row["mpjpe_mm"]) and np.isnan(row["collision_ratio"])
     assert summarize(recs[:1])["n_diverged"] == 0 and np.isfinite(summarize(recs[:1])["mpjpe_mm"])
+
+
+def test_by_activity_takes_each_activitys_frames_alone():
+    """Per-activity rows by hand: two sitting frames (MPJPE 50 and 70 mm over 24 joints each, one in contact) and
+    one standing frame; each row is the mean over its own frames only."""
+    from volsmpl.apps.egohmr.evaluate import by_activity
+
+    def rec(act, err, contact, coll):
+        return {"activity": act, "mpjpe_mm": err, "mpjpe_visible_mm": err, "mpjpe_invisible_mm": np.nan,
+                "n_visible": 24, "n_invisible": 0, "pa_mpjpe_mm": err / 2, "pelvis_err_mm": 100.0,
+                "collision_ratio": coll, "contact": contact, "s_per_frame": 1.0}
+
+    rows = by_activity([rec("sitting", 50.0, True, 0.01), rec("standing", 90.0, False, 0.0),
+                        rec("sitting", 70.0, False, 0.03)])
+    assert list(rows) == ["sitting", "standing"]
+    assert rows["sitting"]["n_frames"] == 2 and rows["sitting"]["mpjpe_mm"] == pytest.approx(60.0)
+    assert rows["sitting"]["pa_mpjpe_mm"] == pytest.approx(30.0)
+    assert rows["sitting"]["contact_pct"] == pytest.approx(50.0)
+    assert rows["sitting"]["collision_ratio"] == pytest.approx(0.02)
+    assert rows["standing"]["mpjpe_mm"] == pytest.approx(90.0) and rows["standing"]["contact_pct"] == 0.0
