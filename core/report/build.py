@@ -101,7 +101,7 @@ SECTIONS: dict[str, Section] = {
                     (), tune=True),   # the figures: those results.json lists
     "hoi": _app("hoi", ("3",), "Human-object reconstruction", rs.hoi_section,
                 command="volsmpl hoi --model volsmpl,coap,mesh --split test --out out/hoi"),
-    "egohmr": _app("egohmr", ("4",), "Human mesh recovery in 3D scenes (EgoHMR)",
+    "egohmr": _app("egohmr", ("4",), "Human mesh recovery in 3D scenes (EgoHMR)", rs.egohmr_section,
                    command="volsmpl egohmr sample --split test --tuned docs/egohmr/tune.json --out out/egohmr"),
     "motion": _app("motion", ("5", "D.1"), "Scene-constrained motion synthesis", rs.motion_section,
                    "volsmpl motion tune --model volsmpl,coap,mesh --scenes all --published-cost --out out/motion",

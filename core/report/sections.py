@@ -342,6 +342,31 @@ def hoi_section(ctx) -> list[str]:
     return out
 
 
+def egohmr_section(ctx) -> list[str]:
+    """Table 4 from `volsmpl egohmr sample` (summary_section), then each guide's MPJPE minus the unguided sampler's,
+    paired over the same frames (`mpjpe_diff_mm`, its 95 % interval), and MPJPE / contact per activity of the frames
+    (results.json `by_activity`)."""
+    d = ctx["results"].get(ctx["name"]) or {}
+    out = summary_section(ctx)
+    summary, acts = d.get("summary") or {}, d.get("by_activity") or {}
+    diffs = [[g, f"{s['mpjpe_diff_mm']:+.2f} [{s['mpjpe_diff_ci95_mm'][0]:+.2f}, {s['mpjpe_diff_ci95_mm'][1]:+.2f}]",
+              fmt(s.get("collision_ratio")), fmt(s.get("contact_pct"))]
+             for g, s in summary.items() if isinstance(s, dict) and "mpjpe_diff_mm" in s]
+    if diffs:
+        out += ["", "MPJPE minus the unguided sampler's, paired over the same frames (mm, 95 % bootstrap interval):",
+                ""]
+        out += md_table(["guide", "MPJPE - unguided", "collision ratio", "contact [%]"], diffs)
+    names = sorted({a for rows in acts.values() if isinstance(rows, dict) for a in rows})
+    if names:
+        guides = [g for g in acts if isinstance(acts[g], dict)]
+        rows = [[a, str(next(acts[g][a]["n_frames"] for g in guides if a in acts[g])),
+                 *[f"{fmt(acts[g][a].get('mpjpe_mm'))} / {fmt(acts[g][a].get('contact_pct'))}" if a in acts[g] else ""
+                   for g in guides]] for a in names]
+        out += ["", "MPJPE [mm] / contact [%] per activity:", ""]
+        out += md_table(["activity", "frames", *guides], rows)
+    return out
+
+
 def tuning_note(t) -> list[str]:
     """The lines saying which rows a result tuned on which cases (`tuning`: tune_scenes, test_scenes, choice
     {back-end: weight}, criterion); none without it."""

@@ -302,3 +302,28 @@ def test_hoi_medians_per_kind_from_the_apps_own_summaries(tmp_path):
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"hoi": res}, git=NoGit())
     assert "| volsmpl | all | 4 | 15.00 -> 20.00 | 50.00 -> 3.00 | 5.00 -> 5.00 | 1.00 -> 1.00 | 2 |" in text
     assert "| volsmpl | cup | 2 | 13.50 -> 15.00 | 50.00 -> 3.00 |" in text
+
+
+def test_egohmr_paired_difference_and_activities_from_the_apps_own_rows(tmp_path):
+    """Hand-made frames through the app's summarize / by_activity / paired_interval: the report shows each guide's
+    paired MPJPE difference (every frame 2 mm worse: +2.00, interval [+2.00, +2.00]) and MPJPE / contact per
+    activity (sitting 50 and 70 mm -> 60)."""
+    from volsmpl.apps.egohmr.evaluate import by_activity, paired_interval, summarize
+
+    def rec(i, act, err, contact):
+        return {"frame": f"f{i}", "activity": act, "mpjpe_mm": err, "mpjpe_visible_mm": err,
+                "mpjpe_invisible_mm": float("nan"), "n_visible": 24, "n_invisible": 0, "pa_mpjpe_mm": err,
+                "pelvis_err_mm": 100.0, "collision_ratio": 0.0, "contact": contact, "s_per_frame": 1.0}
+
+    none = [rec(0, "sitting", 50.0, True), rec(1, "sitting", 70.0, False), rec(2, "standing", 90.0, True)]
+    mesh = [{**r, "mpjpe_mm": r["mpjpe_mm"] + 2, "mpjpe_visible_mm": r["mpjpe_mm"] + 2, "contact": True} for r in none]
+    s_none, s_mesh = summarize(none), summarize(mesh)
+    s_mesh["mpjpe_diff_mm"], *ci = paired_interval(mesh, none)
+    s_mesh["mpjpe_diff_ci95_mm"] = ci
+    res = write(tmp_path / "e.json", {"app": "egohmr", "summary": {"none": s_none, "mesh": s_mesh},
+                                      "by_activity": {"none": by_activity(none), "mesh": by_activity(mesh)},
+                                      "cases": {}})
+    text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"egohmr": res}, git=NoGit())
+    assert "| mesh | +2.00 [+2.00, +2.00] | 0 | 100.0 |" in text
+    assert "| sitting | 2 | 60.00 / 50.00 | 62.00 / 100.0 |" in text
+    assert "| standing | 1 | 90.00 / 100.0 | 92.00 / 100.0 |" in text
