@@ -348,6 +348,34 @@ def object_size_m(category: str, size_m: float | None = None) -> float:
     return float(max(prior[k][0] for k in ("height", "width", "depth") if k in prior))
 
 
+def object_size_spread(category: str, size_m: float | None = None) -> float:
+    """The relative spread (std / mean) of the real largest extent that `object_size_m` gives: the category's
+    (volsmpl.scene.objects.SIZE_PRIOR, the extent of the largest mean) when the size is the category's, 0 when
+    `size_m` states it (a user's measured object).
+
+    Example:
+        >>> round(object_size_spread("sofa"), 3), object_size_spread("sofa", 1.8)
+        (0.11, 0.0)
+    """
+    from volsmpl.scene.objects import SIZE_PRIOR
+
+    if size_m is not None:
+        return 0.0
+    mean, std = max((SIZE_PRIOR[category][k] for k in ("height", "width", "depth") if k in SIZE_PRIOR[category]),
+                    key=lambda m: m[0])
+    return float(std / mean)
+
+
+def is_handheld(case: HoiCase) -> bool:
+    """Whether the case's object is one a person picks up: its category is one of volsmpl.scene.objects.HANDHELD,
+    or, for a category of the user's own (outside SIZE_PRIOR), every contact is a hand's or a forearm's."""
+    from volsmpl.scene.objects import HANDHELD, SIZE_PRIOR
+
+    if case.category in SIZE_PRIOR:
+        return case.category in HANDHELD
+    return bool(case.contacts) and all(part.endswith(("_hand", "_forearm")) for part, _ in case.contacts)
+
+
 def check_case(case: HoiCase, fingerprint: str, part_names, regions: dict) -> None:
     """A case fits the body in use and its object: same body fingerprint, known parts and regions."""
     if case.fingerprint and case.fingerprint != fingerprint:

@@ -20,7 +20,8 @@ points (camera frame for the image terms, the human's body frame for contact and
   frame in which the body was encoded, x = R_h^T (v - t_h) / s_h: the paper's f(v / s_h) with the human's current
   similarity entering through the frame (the model kind's `penetration` of its query values: ReLU(-sdf), or
   COAP's occupancy term). The body's pose is fixed during the joint stage, so `body_query` prepares it once.
-- `scale_prior`: |s - s_prior| per similarity (the paper's language-model prior stands in a table of real sizes).
+- `scale_prior`: |s - s_prior| per similarity beyond a free band (the paper's language-model prior stands in a table
+  of real sizes; the band is the category's spread of sizes, FitConfig.scale_free_std).
 - `keypoint_term`, `silhouette_term`: the first stage's observations, kept: squared reprojection error of the body
   joints (confidence-weighted, in units of the focal length: about radians^2) and a two-way 2D Chamfer between the
   projected object vertices and the silhouette pixels relative to the silhouette's spread (dimensionless), by
@@ -202,9 +203,17 @@ def penetration(query, x_body: torch.Tensor, obj_mask: torch.Tensor) -> torch.Te
     return (pen * m).sum(dim=1) / m.sum(dim=1).clamp_min(1.0)
 
 
-def scale_prior(scale: torch.Tensor, prior) -> torch.Tensor:
-    """|scale - prior|. Shape: (B,), (B,) or float -> (B,)."""
-    return (scale - torch.as_tensor(prior, dtype=scale.dtype, device=scale.device)).abs()
+def scale_prior(scale: torch.Tensor, prior, free=0.0) -> torch.Tensor:
+    """max(|scale - prior| - free, 0): no pull within `free` of the prior (a category's real sizes spread about its
+    mean; the image decides there), a constant one beyond. Shape: scale (B,), prior and free (B,) or float -> (B,).
+
+    Example:
+        >>> scale_prior(torch.tensor([1.05, 1.3]), 1.0, free=0.1)
+        tensor([0.0000, 0.2000])
+    """
+    prior = torch.as_tensor(prior, dtype=scale.dtype, device=scale.device)
+    free = torch.as_tensor(free, dtype=scale.dtype, device=scale.device)
+    return ((scale - prior).abs() - free).clamp_min(0.0)
 
 
 def _project(x: torch.Tensor, K: torch.Tensor) -> torch.Tensor:

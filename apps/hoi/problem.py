@@ -28,7 +28,8 @@ import torch
 
 from volsmpl.geometry.rotations import matrix_to_rotation_6d, rotation_6d_to_matrix
 
-from .case import ANY_REGION, HoiCase, check_case, object_mesh, object_size_m, object_template
+from .case import (ANY_REGION, HoiCase, check_case, is_handheld, object_mesh, object_size_m, object_size_spread,
+                   object_template)
 from .losses import body_query, contact_terms, relative_similarity, to_camera
 
 __all__ = ["REGION_TRIANGLES", "Problem", "object_scale_prior", "region_triangles"]
@@ -159,6 +160,12 @@ class Problem:
                                           sample_surface(m, PEN_POINTS, seed=0)[0] for m in self.meshes], dev, fill=FAR)
         self.obj_samples = torch.as_tensor(np.stack(samples), dtype=dt, device=dev)
         self.prior_object = torch.tensor(priors, dtype=dt, device=dev)
+        self.handheld = torch.tensor([is_handheld(c) for c in cases], device=dev)  # (B,) bool: FitConfig.w_pen_handheld
+        # the scale prior's free band (FitConfig.scale_free_std): that many of the category's relative spread of real
+        # sizes, in scale; none for a handheld object
+        self.prior_object_free = self.prior_object * torch.tensor(
+            [0.0 if is_handheld(c) else cfg.scale_free_std * object_size_spread(c.category, c.size_m) for c in cases],
+            dtype=dt, device=dev)
         self.pair_case = torch.tensor(pair_case, dtype=torch.long, device=dev)
         if self.pairs:
             cols = list(zip(*self.pairs))

@@ -3,7 +3,7 @@
     volsmpl hoi tune --grid w_silhouette=1e3,4e3,1.6e4 --model volsmpl --cases all --batch 10 --out docs/hoi
     volsmpl hoi tune --grid w_silhouette=1e3,4e3 --grid w_normal=1e2,1e3 ...      # every combination of the two
 
-Each --grid names a weight of FitConfig (a `w_` field) and its values; the settings tried are every combination,
+Each --grid names a weight of FitConfig (a `w_` field) or one of SETTINGS (scale_free_std, ...) and its values; the settings tried are every combination,
 each model kind fitting the selected cases of the 'tune' split at FitConfig's defaults otherwise (--batch cases
 at a time). The score of a setting is the mean over kinds and cases of contact_cm + obj_trans_err_cm +
 obj_rot_err_deg + collision_pct after the fit (all lower is better: the contact and the object's placement in cm,
@@ -18,6 +18,10 @@ from dataclasses import asdict, replace
 import numpy as np
 
 
+#: the FitConfig fields besides the weights that --grid takes
+SETTINGS = ("scale_free_std", "rotation_after", "contact_fraction", "contact_huber", "depth_range")
+
+
 def score(results: list) -> float:
     """Mean over the cases of contact_cm + obj_trans_err_cm + obj_rot_err_deg + collision_pct after the fit (a
     rotation of None, a ball's, counts 0)."""
@@ -27,19 +31,19 @@ def score(results: list) -> float:
 
 
 def parse_grid(specs: list) -> dict:
-    """--grid NAME=v1,v2 ... -> {NAME: [v1, v2]}: NAME a weight of FitConfig (a `w_` field), the values numbers
-    >= 0; one line naming the fix otherwise."""
+    """--grid NAME=v1,v2 ... -> {NAME: [v1, v2]}: NAME a weight of FitConfig (a `w_` field) or one of SETTINGS, the
+    values numbers >= 0 (FitConfig checks each setting's range); one line naming the fix otherwise."""
     from dataclasses import fields
 
     from .fit import FitConfig
 
-    weights = [f.name for f in fields(FitConfig) if f.name.startswith("w_")]
+    weights = [f.name for f in fields(FitConfig) if f.name.startswith("w_") or f.name in SETTINGS]
     grid = {}
     for spec in specs:
         name, eq, values = spec.partition("=")
         name = name.strip().replace("-", "_")
         if not eq or name not in weights:
-            raise ValueError(f"--grid {spec!r}: give a weight and its values, NAME=v1,v2 with NAME one of "
+            raise ValueError(f"--grid {spec!r}: give a weight or setting and its values, NAME=v1,v2 with NAME one of "
                              f"{', '.join(weights)}")
         try:
             vals = [float(x) for x in values.split(",") if x.strip()]
@@ -49,6 +53,11 @@ def parse_grid(specs: list) -> dict:
             raise ValueError(f"--grid {spec!r}: give one or more finite weights >= 0")
         if name in grid:
             raise ValueError(f"--grid names {name} twice: give its values once")
+        for v in vals:  # each value in its field's range (FitConfig's checks), before any fit
+            try:
+                FitConfig(**{name: v})
+            except ValueError as e:
+                raise ValueError(f"--grid {spec!r}: {e}") from None
         grid[name] = vals
     return grid
 
@@ -72,11 +81,11 @@ def run_tune(args, cases: list) -> int:
     vols = volumes(body, models, ckpts, args.device)
     base = FitConfig.preset(args.preset, iters=args.iters, lr=args.lr, contact_fraction=args.contact_fraction,
                             contact_huber=args.contact_huber, device=args.device)
+    settings = [dict(zip(grid, values)) for values in itertools.product(*grid.values())]
+    cfgs = [replace(base, **setting) for setting in settings]  # every setting checked before the first fit
     rows = []
-    for values in itertools.product(*grid.values()):
-        setting = dict(zip(grid, values))
+    for setting, cfg in zip(settings, cfgs):
         label = " ".join(f"{k} {v:g}" for k, v in setting.items())
-        cfg = replace(base, **setting)
         res = {m: [] for m in models}
         for m in models:
             for i0 in progress(range(0, len(cases), args.batch), f"hoi tune {label} {m}", quiet=args.quiet):

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -277,16 +278,47 @@ def test_presets_give_the_papers_weights_and_ours(body):
 
     paper, tuned = FitConfig.preset("paper"), FitConfig()
     assert (paper.w_contact, paper.w_normal, paper.w_pen, paper.w_pen_mesh, paper.w_scale) == (1e5, 1e3, 1e4, 1e3, 1e3)
-    assert paper.rotation_after == 0.0 and paper.depth_steps == 0
+    assert paper.rotation_after == 0.0 and paper.depth_steps == 0 and paper.scale_free_std == 0.0
     assert FitConfig.preset("tuned") == tuned and tuned.w_pen_mesh is None and tuned.rotation_after > 0
     case = case_from_dict(ball_case(body))
-    for kind, cfg, want in (("mesh", paper, 1e3), ("volsmpl", paper, 1e4), ("mesh", tuned, tuned.w_pen)):
+    for kind, cfg, want in (("mesh", paper, 1e3), ("volsmpl", paper, 1e4), ("mesh", tuned, tuned.w_pen_handheld)):
         vol = volsmpl.attach_volume(body, model=kind)
         assert _terms(Problem(case, body, vol, cfg), vol, cfg)["penetration"].weight == want
+    # the scale prior's free band: a stool's real size is 0.500 +- 0.080 m (SIZE_PRIOR, its largest extent), so 1 std
+    # is 0.080 / 0.500 of the prior scale; a handheld ball has none, nor has the paper's prior
+    vol = volsmpl.attach_volume(body, model="mesh")
+    stool = case_from_dict({**ball_case(body), "object": {"category": "stool", "template_seed": 0}})
+    prob = Problem([stool, case], body, vol, tuned)
+    assert float(prob.prior_object_free[0]) == pytest.approx(float(prob.prior_object[0]) * 0.080 / 0.500, rel=1e-6)
+    assert float(prob.prior_object_free[1]) == 0.0
+    assert float(Problem(stool, body, vol, paper).prior_object_free[0]) == 0.0
     with pytest.raises(ValueError, match="unknown preset"):
         FitConfig.preset("fast")
     with pytest.raises(ValueError, match="rotation_after"):
         FitConfig(rotation_after=1.0)
+
+
+def test_penetration_weights_per_case_handheld_or_not():
+    """A ball (handheld) and a table in one batch: the tuned preset weighs the ball's penetration 3e5 and the table's
+    1e5 for every kind; the paper's weighs both 1e4, or 1e3 with the exact mesh."""
+    from volsmpl.apps.hoi.fit import penetration_weights
+
+    prob = SimpleNamespace(handheld=torch.tensor([True, False]), prior_object=torch.ones(2))
+    tuned, paper = FitConfig(), FitConfig.preset("paper")
+    assert penetration_weights(prob, "volsmpl", tuned).tolist() == [3e5, 1e5]
+    assert penetration_weights(prob, "mesh", tuned).tolist() == [3e5, 1e5]
+    assert penetration_weights(prob, "coap", paper).tolist() == [1e4, 1e4]
+    assert penetration_weights(prob, "mesh", paper).tolist() == [1e3, 1e3]
+
+
+def test_handheld_by_category_or_by_a_users_hand_contacts():
+    from volsmpl.apps.hoi.case import is_handheld
+
+    case = lambda category, *parts: SimpleNamespace(category=category, contacts=[(p, "any") for p in parts])  # noqa: E731
+    assert is_handheld(case("phone", "right_hand")) and is_handheld(case("box", "left_hand", "chest"))
+    assert not is_handheld(case("table", "left_hand", "right_hand"))  # furniture, though leant on with the hands
+    assert is_handheld(case("tray", "left_hand", "right_forearm"))   # a user's own category held in the hands
+    assert not is_handheld(case("teddy", "left_hand", "chest")) and not is_handheld(case("crate"))
 
 
 def test_the_objects_rotation_is_held_for_its_share_of_the_steps(body):

@@ -174,6 +174,22 @@ def test_scale_prior_and_keypoints_by_hand():
     assert float(keypoint_term(X, kp, K)) == pytest.approx(0.0, abs=1e-10)
 
 
+def test_scale_prior_is_free_within_its_band_and_pulls_at_unit_slope_beyond():
+    s = torch.tensor([0.95, 1.08, 1.3, 0.6], requires_grad=True)
+    v = scale_prior(s, torch.tensor([1.0, 1.0, 1.0, 1.0]), torch.tensor([0.1, 0.1, 0.1, 0.0]))
+    assert torch.allclose(v, torch.tensor([0.0, 0.0, 0.2, 0.4]), atol=1e-6)
+    v.sum().backward()
+    assert s.grad.tolist() == [0.0, 0.0, 1.0, -1.0]
+
+
+def test_object_size_spread_by_hand():
+    from volsmpl.apps.hoi.case import object_size_spread
+    # sofa: width 2.000 +- 0.220 m is its largest extent; cup: width 0.120 +- 0.006 m (SIZE_PRIOR)
+    assert object_size_spread("sofa") == pytest.approx(0.11)
+    assert object_size_spread("cup") == pytest.approx(0.05)
+    assert object_size_spread("sofa", 1.8) == 0.0  # a stated size has no spread
+
+
 def test_silhouette_zero_on_the_mask_and_positive_off_it():
     K = torch.tensor([[[500.0, 0, 320], [0, 500, 240], [0, 0, 1]]])
     X = torch.tensor([[[0.1, -0.2, 2.0], [0.0, 0.0, 4.0], [-0.1, 0.1, 3.0]]])
