@@ -42,7 +42,8 @@ def test_every_guide_samples_two_frames(body, frames, tiny_ckpt):
     rows = {}
     for g, a in (("none", 0.0), ("volsmpl", 30.0), ("coap", 0.4), ("mesh", 30.0)):
         vol = None if g == "none" else volsmpl.attach_volume(volsmpl.create_body(), model=g)
-        recs = sample_frames(net, body, frames, prep, vol, GuideOptions(scale=a), batch=2)
+        # two guided steps, one with Sigma_t and one plain (the default's ten repeat these two kinds)
+        recs = sample_frames(net, body, frames, prep, vol, GuideOptions(scale=a, steps=2, plain_steps=1), batch=2)
         assert len(recs) == 2 and all(np.isfinite(r["mpjpe_mm"]) and np.isfinite(r["collision_ratio"]) for r in recs)
         rows[g] = summarize(recs)
     assert rows["none"]["n_frames"] == 2 and rows["none"]["mpjpe_mm"] > 0
@@ -74,7 +75,8 @@ def test_cli_sample_writes_results_and_figures(tmp_path, tiny_ckpt):
     ckpt, _ = tiny_ckpt
     out = tmp_path / "out"
     rc = main(["egohmr", "sample", "--model", "none,volsmpl", "--frames", "2", "--checkpoint", str(ckpt),
-               "--out", str(out), "--render", "1", "--batch", "2", "--budget-mb", "64"])
+               "--out", str(out), "--render", "1", "--batch", "2", "--budget-mb", "64", "--guide-steps", "2",
+               "--plain-steps", "1"])
     assert rc == 0
     res = json.loads((out / "results.json").read_text())
     assert set(res["summary"]) == {"none", "volsmpl"} and res["paper"]["volsmpl"]["batch"] == 30
@@ -119,8 +121,11 @@ def test_encoder_bf16_reaches_the_learned_guides_encoders(tmp_path, tiny_ckpt, e
     for flag in ([], ["--encoder-bf16"]):
         seen.clear()
         out = tmp_path / f"out{len(flag)}"
+        # one guided step (plain): every guided step calls the encoders alike, and one keeps the emulated bfloat16
+        # of a CPU without it cheap
         assert main(["egohmr", "sample", "--model", "volsmpl,coap", "--frames", "1", "--checkpoint", str(ckpt),
-                     "--out", str(out), "--render", "0", "--batch", "1", "--no-max-batch"] + flag) == 0
+                     "--out", str(out), "--render", "0", "--batch", "1", "--no-max-batch", "--guide-steps", "1",
+                     "--plain-steps", "1"] + flag) == 0
         assert seen and all(b == bool(flag) for b in seen)
         assert json.loads((out / "results.json").read_text())["config"]["encoder_bf16"] is bool(flag)
 
