@@ -421,7 +421,7 @@ MUTANTS = {
                                     [T + "apps/hoi/test_losses.py::test_silhouette_is_relative_to_the_silhouettes_spread"]),
     "hoi_along_ray_keeps_the_depth": ("apps/hoi/fit.py", "    best = offsets[losses.argmin(dim=0)]", "    best = offsets[:1].expand(losses.shape[1])",
                                       [T + "apps/hoi/test_fit.py::test_along_ray_moves_the_object_to_its_depth_and_keeps_its_projection"]),
-    "hoi_mesh_weight_always_w_pen": ("apps/hoi/fit.py", 'if volume.kind == "mesh" and cfg.w_pen_mesh is not None', "if False",
+    "hoi_mesh_weight_always_w_pen": ("apps/hoi/fit.py", 'if kind == "mesh" and cfg.w_pen_mesh is not None', "if False",
                                      [T + "apps/hoi/test_fit.py::test_presets_give_the_papers_weights_and_ours"]),
     "hoi_rotation_never_held": ("apps/hoi/problem.py", 'start=self.rotation_start if who == "object" else 0', "start=0",
                                 [T + "apps/hoi/test_fit.py::test_the_objects_rotation_is_held_for_its_share_of_the_steps"]),
