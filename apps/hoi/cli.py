@@ -73,6 +73,9 @@ def add_parser(sub):
                         "part, the plain one-way Chamfer")
     p.add_argument("--contact-huber", type=float, default=d.contact_huber,
                    help="metres: contact distances beyond this count linearly (pseudo-Huber); 0: squared throughout")
+    p.add_argument("--contact-margin", type=float, default=None,
+                   help="metres: a contact vertex this near the object counts as touching it (the contact stops "
+                        "pulling there); default: the preset's (tuned %g, paper 0)" % PRESETS["tuned"]["contact_margin"])
     p.add_argument("--batch", type=int, default=1,
                    help="cases optimised together (padded; each as if alone); ms/iter is the batch's divided by it")
     p.add_argument("--grid", action="append", default=None, metavar="NAME=V1,V2",
@@ -166,12 +169,12 @@ def _cases(args, split: str, database) -> list:
 
 #: the options each action reads (volsmpl.apps.checks.applies refuses the others)
 _COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device"}
-_FIT = {"preset", "iters", "lr", "w_keypoints", "w_silhouette", "contact_fraction", "contact_huber"}
+_FIT = {"preset", "iters", "lr", "w_keypoints", "w_silhouette", "contact_fraction", "contact_huber", "contact_margin"}
 USES = {"make-db": {"n", "seed", "db", "threads"},
         "run": _COMMON | _FIT | {"resume", "render", "cases", "split", "db", "seed", "batch", "save_meshes"},
         "fit": _COMMON | _FIT | {"resume", "render", "case", "save_meshes"},  # fit writes its meshes always
-        "tune": _COMMON | {"preset", "iters", "lr", "contact_fraction", "contact_huber", "cases", "split", "db", "seed",
-                           "grid", "batch"},
+        "tune": _COMMON | {"preset", "iters", "lr", "contact_fraction", "contact_huber", "contact_margin", "cases",
+                           "split", "db", "seed", "grid", "batch"},
         "make-case": {"object", "units", "category", "size_m", "body", "keypoints", "image_size", "focal",
                       "principal", "K", "object_pose", "mask", "contact", "out"}}
 
@@ -191,7 +194,14 @@ def check_options(args) -> None:
         number(getattr(args, flag), "--" + flag.replace("_", "-"), lo=0, what="a term's weight")
     number(args.contact_fraction, "--contact-fraction", lo=0, hi=1, lo_open=True, what="a share of a part's vertices")
     number(args.contact_huber, "--contact-huber", lo=0, what="metres; 0: squared throughout")
+    if args.contact_margin is not None:
+        number(args.contact_margin, "--contact-margin", lo=0, what="metres; 0: the contact pulls onto the surface")
     number(args.batch, "--batch", lo=1, what="cases optimised together")
+
+
+def margin_override(args) -> dict:
+    """{'contact_margin': --contact-margin} when given, else {} (the preset's margin)."""
+    return {} if args.contact_margin is None else {"contact_margin": args.contact_margin}
 
 
 def check_data(cases: list, body, device: str, warnings: list) -> None:
@@ -273,7 +283,7 @@ def _run(args, models: list, ckpts: dict) -> int:
     out = Path(args.out)
     cfg = FitConfig.preset(args.preset, iters=args.iters, lr=args.lr, w_keypoints=args.w_keypoints,
                            w_silhouette=args.w_silhouette, contact_fraction=args.contact_fraction,
-                           contact_huber=args.contact_huber, device=args.device)
+                           contact_huber=args.contact_huber, device=args.device, **margin_override(args))
     if args.action == "fit":
         if not args.case:
             raise ValueError("'volsmpl hoi fit' needs --case FILE (a case file, format in apps/hoi/case.py)")

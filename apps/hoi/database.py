@@ -38,7 +38,7 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from .case import HoiCase, Similarity, case_to_dict, load_case, save_case
+from .case import HoiCase, Similarity, load_case, save_case
 from .case_geometry import raster_mask
 from .interactions import RECIPES, Recipe
 from volsmpl.body.rig import Rig

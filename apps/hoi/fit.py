@@ -5,10 +5,11 @@ the camera frame (Problem.variables: the human's log-scale, the object's log-sca
 (6D) and a translation held divided by its own scale each), from the case's first-stage estimates, with Adam
 (lr 2e-3, 1,000 steps) on
 
-    L = 1e5 L_contact + 1e2 L_normal + 1e5 L_pen + 1e3 L_scale + w_keypoints L_keypoints + w_silhouette L_silhouette
+    L = 1e5 L_contact + 1e2 L_normal + w_pen L_pen + 1e3 L_scale + w_keypoints L_keypoints + w_silhouette L_silhouette
 
-(apps/hoi/losses.py; FitConfig's defaults are the preset 'tuned', PRESETS['paper'] the paper's weights: normal 1e3,
-penetration 1e4, 1e3 with the exact mesh). Coarse to fine: the object is first moved along its camera ray to the
+(apps/hoi/losses.py; w_pen 3e5 for an object a person picks up, case.is_handheld, 1e5 for the others; a patch vertex
+within `contact_margin` of its region counts as touching it. FitConfig's defaults are the preset 'tuned',
+PRESETS['paper'] the paper's weights: normal 1e3, penetration 1e4, 1e3 with the exact mesh, no contact margin). Coarse to fine: the object is first moved along its camera ray to the
 depth of the lowest loss (`along_ray`), its rotation then held for the first 40 % of the steps (`rotation_after`). The body is posed once; contact and penetration are measured in its frame (the object placed
 by the relative similarity), so its part vertices are constants and the penetration term queries the model kind
 (`volume`) at the object vertices only: 'volsmpl' and 'coap' encode the body once (losses.body_query) and 'mesh'
@@ -59,9 +60,9 @@ CAMERA_FRAME = "camera (OpenCV axes: x right, y down, z forward; metres)"  # the
 #: 25.5 at 3e5 (beds, sofas and carts pushed off their contacts): hence 3e5 for handheld objects, 1e5 for the others.
 PRESETS = {
     "paper": {"w_normal": 1e3, "w_pen": 1e4, "w_pen_mesh": 1e3, "w_pen_handheld": None, "rotation_after": 0.0,
-              "depth_steps": 0, "scale_free_std": 0.0},
+              "depth_steps": 0, "scale_free_std": 0.0, "contact_margin": 0.0},
     "tuned": {"w_normal": 1e2, "w_pen": 1e5, "w_pen_mesh": None, "w_pen_handheld": 3e5, "rotation_after": 0.4,
-              "depth_steps": 41, "scale_free_std": 1.0},
+              "depth_steps": 41, "scale_free_std": 1.0, "contact_margin": 0.0},
 }
 
 
@@ -94,6 +95,10 @@ class FitConfig:
     # metres: the contact's squared distances become linear beyond this (pseudo-Huber, losses.contact_terms); 0: the
     # plain squared distance (its first steps, tens of cm off, stall Adam for the rest of the run)
     contact_huber: float = 0.02
+    # metres: a contact patch vertex this near its region counts as touching it (losses.contact_terms), so the contact
+    # stops pulling there and the penetration term alone sets how near a thin object comes (the database's phones lie
+    # about 1 cm from the palm at the truth); 0: the contact pulls the patch onto the region's surface
+    contact_margin: float = PRESETS["tuned"]["contact_margin"]
     region_points: int = 256  # points sampled on each object contact region
     part_points: int = 1024  # body part vertices per contact pair (an even stride through the part's vertices)
     silhouette_points: int = 500  # silhouette pixels used (an even stride through the case's sample)
@@ -144,6 +149,8 @@ class FitConfig:
             raise ValueError(f"scale_free_std must be a finite number of standard deviations >= 0, got {self.scale_free_std}")
         if not (np.isfinite(self.contact_huber) and self.contact_huber >= 0):
             raise ValueError(f"contact_huber must be a finite length >= 0 (metres), got {self.contact_huber}")
+        if not (np.isfinite(self.contact_margin) and self.contact_margin >= 0):
+            raise ValueError(f"contact_margin must be a finite length >= 0 (metres), got {self.contact_margin}")
         for k, v in asdict(self).items():
             if k.startswith("w_") and not (v is None and k in ("w_pen_mesh", "w_pen_handheld")) and not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"{k} must be a finite weight >= 0, got {v}")

@@ -132,17 +132,12 @@ def lie_bed(rig: Rig, rng: np.random.Generator, template_seed: int) -> Recipe:
     comp_names = list(tmpl.component_names)
     pil = [i for i, n in enumerate(comp_names) if n.startswith("pillow")]
     pv = tmpl.mesh.vertices[tmpl.mesh.faces[np.isin(tmpl.component, pil)]].reshape(-1, 3)
-    pillow = float(pv[:, 1].max()) - sh
-    pz = 0.5 * (pv[:, 2].min() + pv[:, 2].max())
-
-    px = (pv[:, 0].min(), pv[:, 0].max())
-    pz_lo, pz_hi = pv[:, 2].min(), pv[:, 2].max()
+    pz_hi = pv[:, 2].max()  # the pillows' foot-ward edge
 
     # the head on the mattress just foot-ward of the pillows (lying on the pillows would lift the shoulders)
     e = set_joints(e, neck=(rng.uniform(0.0, 0.25), rng.uniform(-0.3, 0.3), 0))
     v = rig.pose(e, G).vertices[0].double().numpy()
     tz = float(rig.part_vertices(v, "head")[:, 2].min()) - pz_hi - 0.015
-    v = rig.pose(e, G).vertices[0].double().numpy()
     torso = rig.part_vertices(v, "pelvis")
     ty = float(torso[:, 1].min()) - sh + 0.02
     t = np.array([-float(torso[:, 0].mean()), ty, tz])

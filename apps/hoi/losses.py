@@ -62,7 +62,7 @@ def contact_terms(part_pts: torch.Tensor, part_normals: torch.Tensor, region_pts
                   region_normals: torch.Tensor, region_mask: torch.Tensor, fraction: float = 1.0,
                   region_tris: torch.Tensor | None = None, tri_mask: torch.Tensor | None = None, huber: float = 0.0,
                   part_mask: torch.Tensor | None = None, patch_k: torch.Tensor | None = None,
-                  tri_owner: torch.Tensor | None = None):
+                  tri_owner: torch.Tensor | None = None, margin: float = 0.0):
     """L_contact and L_normal of one interacting pair per case (module docstring).
 
     Shape: part_pts / part_normals (B, P, 3) (the body part's vertices and unit normals); region_pts /
@@ -77,6 +77,9 @@ def contact_terms(part_pts: torch.Tensor, part_normals: torch.Tensor, region_pts
     a few percent for d < h / 2, linear, of slope 2 h, far away), so the first steps from a first stage tens of cm
     off do not make gradients 10-100x those near contact (Adam's second-moment estimate would keep later steps
     small for the rest of the run); 0: the squared distance.
+    margin >= 0 (metres): a patch vertex within this distance of the region counts as touching it, its distance d
+    becomes max(d - margin, 0) before the pseudo-Huber (the contact stops pulling at the margin, so the penetration
+    term alone decides how near a thin object comes); 0: the distance itself.
     A case whose region has no point (triangle) facing the part (all behind it) uses the whole region; one whose
     part has no vertex facing the region uses every vertex as a candidate.
     Padded batches (cases of different sizes): part_mask (B, P) marks each case's part vertices (padding False);
@@ -92,6 +95,8 @@ def contact_terms(part_pts: torch.Tensor, part_normals: torch.Tensor, region_pts
     """
     if not 0.0 < fraction <= 1.0:
         raise ValueError(f"fraction must be in (0, 1], got {fraction}")
+    if not margin >= 0:
+        raise ValueError(f"margin must be a length >= 0 (metres), got {margin}")
     if part_mask is None:
         part_mask = torch.ones(part_pts.shape[:2], dtype=torch.bool, device=part_pts.device)
     pm = part_mask.to(part_pts.dtype)[..., None]
@@ -116,6 +121,8 @@ def contact_terms(part_pts: torch.Tensor, part_normals: torch.Tensor, region_pts
     else:
         near = _nearest_triangles if tri_owner is None else _nearest_owned_triangles
         d2k, nk = near(_take(part_pts, sel), region_tris, centre, tri_mask if tri_owner is None else tri_owner)
+    if margin > 0:  # the clamp keeps sqrt's gradient finite at d = 0 (its own gradient there is 0)
+        d2k = (d2k.clamp_min(1e-12).sqrt() - margin).clamp_min(0.0).square()
     if huber > 0:
         d2k = 2 * huber ** 2 * ((1 + d2k / huber ** 2).sqrt() - 1)
     # the normals of the two contact sets: the patch's mean normal and that of the region where its vertices are nearest

@@ -160,11 +160,12 @@ class Problem:
                                           sample_surface(m, PEN_POINTS, seed=0)[0] for m in self.meshes], dev, fill=FAR)
         self.obj_samples = torch.as_tensor(np.stack(samples), dtype=dt, device=dev)
         self.prior_object = torch.tensor(priors, dtype=dt, device=dev)
-        self.handheld = torch.tensor([is_handheld(c) for c in cases], device=dev)  # (B,) bool: FitConfig.w_pen_handheld
+        handheld = [is_handheld(c) for c in cases]
+        self.handheld = torch.tensor(handheld, device=dev)  # (B,) bool: FitConfig.w_pen_handheld
         # the scale prior's free band (FitConfig.scale_free_std): that many of the category's relative spread of real
         # sizes, in scale; none for a handheld object
         self.prior_object_free = self.prior_object * torch.tensor(
-            [0.0 if is_handheld(c) else cfg.scale_free_std * object_size_spread(c.category, c.size_m) for c in cases],
+            [0.0 if h else cfg.scale_free_std * object_size_spread(c.category, c.size_m) for c, h in zip(cases, handheld)],
             dtype=dt, device=dev)
         self.pair_case = torch.tensor(pair_case, dtype=torch.long, device=dev)
         if self.pairs:
@@ -179,6 +180,7 @@ class Problem:
             self.patch_k = torch.tensor([max(1, math.ceil(cfg.contact_fraction * len(p[0]))) for p in self.pairs],
                                         device=dev)
         self.contact_fraction, self.contact_huber = cfg.contact_fraction, cfg.contact_huber
+        self.contact_margin = cfg.contact_margin
         self.rotation_start = round(cfg.rotation_after * cfg.iters)  # the first step that turns the object
         self.K = torch.as_tensor(np.stack([c.K for c in cases]), dtype=dt, device=dev)
         self.kp = torch.as_tensor(np.stack([c.keypoints_2d for c in cases]), dtype=dt, device=dev)
@@ -262,7 +264,7 @@ class Problem:
                                         self.reg_n @ R.transpose(1, 2), self.reg_mask, self.contact_fraction,
                                         _similar(self.reg_tri, self.tri_owner, s, R, t), None,
                                         huber=self.contact_huber, part_mask=self.part_mask, patch_k=self.patch_k,
-                                        tri_owner=self.tri_owner)
+                                        tri_owner=self.tri_owner, margin=self.contact_margin)
             contact = contact.index_add(0, self.pair_case, c)
             normal = normal.index_add(0, self.pair_case, nc)
         return {"human": human, "object": obj, "obj_body": to_camera(self.obj_v, *rel),

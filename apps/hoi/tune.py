@@ -19,7 +19,7 @@ import numpy as np
 
 
 #: the FitConfig fields besides the weights that --grid takes
-SETTINGS = ("scale_free_std", "rotation_after", "contact_fraction", "contact_huber", "depth_range")
+SETTINGS = ("scale_free_std", "rotation_after", "contact_fraction", "contact_huber", "contact_margin", "depth_range")
 
 
 def score(results: list) -> float:
@@ -80,7 +80,8 @@ def run_tune(args, cases: list) -> int:
     body = volsmpl.create_body().to(args.device)
     vols = volumes(body, models, ckpts, args.device)
     base = FitConfig.preset(args.preset, iters=args.iters, lr=args.lr, contact_fraction=args.contact_fraction,
-                            contact_huber=args.contact_huber, device=args.device)
+                            contact_huber=args.contact_huber, device=args.device,
+                            **({} if args.contact_margin is None else {"contact_margin": args.contact_margin}))
     settings = [dict(zip(grid, values)) for values in itertools.product(*grid.values())]
     cfgs = [replace(base, **setting) for setting in settings]  # every setting checked before the first fit
     rows = []

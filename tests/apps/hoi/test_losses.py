@@ -1,6 +1,8 @@
 """Loss terms of the human–object app on hand-made configurations, against exact references."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -42,6 +44,30 @@ def test_contact_is_zero_when_touching_and_grows_with_the_gap():
     assert bool(facing.all()) and float(c2) == pytest.approx(0.03 ** 2, rel=1e-5)  # mean squared gap of 3 cm
     _, n3, _, _ = contact_terms(q + torch.tensor([0.0, 0.03, 0.0]), up, q, up, mask)
     assert float(n3) == pytest.approx(2.0, abs=1e-6)  # same direction: 1 + cos = 2
+
+
+def test_contact_margin_counts_a_gap_within_it_as_touching():
+    """The margin by hand: a plane patch 3 cm off its region costs (3 - m)^2 cm^2 with margin m < 3 cm and nothing,
+    with a zero (finite) gradient, at m >= 3 cm; a patch on the region keeps a finite gradient; the pseudo-Huber
+    applies to the shortened distance; a negative margin is refused."""
+    g = torch.Generator().manual_seed(1)
+    q = torch.rand(1, 30, 3, generator=g) * torch.tensor([0.2, 0.0, 0.2])
+    up = torch.tensor([0.0, 1.0, 0.0]).expand(1, 30, 3)
+    mask = torch.ones(1, 30, dtype=torch.bool)
+    gap = torch.tensor([0.0, 0.03, 0.0])
+    c, _, _, _ = contact_terms(q + gap, -up, q, up, mask, margin=0.01)
+    assert float(c) == pytest.approx(0.02 ** 2, rel=1e-4)
+    for p0, m in ((q + gap, 0.03), (q + gap, 0.05), (q.clone(), 0.01)):
+        p = p0.clone().requires_grad_(True)
+        c, _, _, _ = contact_terms(p, -up, q, up, mask, margin=m)
+        c.backward()
+        assert float(c) == pytest.approx(0.0, abs=1e-10)
+        assert torch.isfinite(p.grad).all() and float(p.grad.abs().max()) < 1e-6
+    h = 0.02
+    c, _, _, _ = contact_terms(q + 2 * gap, -up, q, up, mask, huber=h, margin=0.01)  # 6 cm off, 5 cm counted
+    assert float(c) == pytest.approx(2 * h ** 2 * (math.sqrt(1 + 0.05 ** 2 / h ** 2) - 1), rel=1e-4)
+    with pytest.raises(ValueError, match="margin"):
+        contact_terms(q + gap, -up, q, up, mask, margin=-0.01)
 
 
 def test_contact_uses_only_region_points_facing_the_part():
