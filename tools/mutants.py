@@ -443,8 +443,13 @@ MUTANTS = {
                                     [T + "apps/hoi/test_fit.py::test_penetration_weights_per_case_handheld_or_not"]),
     "hoi_user_category_never_handheld": ("apps/hoi/case.py", "    return bool(case.contacts) and all(", "    return False and all(",
                                          [T + "apps/hoi/test_fit.py::test_handheld_by_category_or_by_a_users_hand_contacts"]),
-    "hoi_scale_band_for_handheld_too": ("apps/hoi/problem.py", "[0.0 if is_handheld(c) else cfg.scale_free_std", "[cfg.scale_free_std",
+    "hoi_scale_band_for_handheld_too": ("apps/hoi/problem.py", "[0.0 if h else cfg.scale_free_std", "[cfg.scale_free_std",
                                         [T + "apps/hoi/test_fit.py::test_presets_give_the_papers_weights_and_ours"]),
+    "hoi_contact_margin_ignored": ("apps/hoi/losses.py", "    if margin > 0:  # the clamp", "    if False:  # the clamp",
+                                   [T + "apps/hoi/test_losses.py::test_contact_margin_counts_a_gap_within_it_as_touching"]),
+    "hoi_contact_margin_not_passed": ("apps/hoi/problem.py", "tri_owner=self.tri_owner, margin=self.contact_margin)",
+                                      "tri_owner=self.tri_owner)",
+                                      [T + "apps/hoi/test_fit.py::test_contact_margin_reaches_every_pair_of_the_fit"]),
 }
 
 

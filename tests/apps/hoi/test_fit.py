@@ -270,6 +270,26 @@ def test_along_ray_moves_the_object_to_its_depth_and_keeps_its_projection(body):
     assert torch.equal(same["object_rel_log_scale"].value, start["object_rel_log_scale"].value) and float(none[0]) == 0
 
 
+def test_contact_margin_reaches_every_pair_of_the_fit():
+    """FitConfig.contact_margin is the contact term's margin for every pair: at the truth of a seated case the
+    patches lie within a few cm of their regions, so a 1 m margin leaves no contact cost and none leaves some; the
+    paper's preset has none; a negative margin is refused."""
+    from volsmpl.apps.hoi import database as db
+
+    case = db.make_case(0, seed=0)
+    body, _ = db._default_body()
+    vol = volsmpl.attach_volume(body, model="mesh")
+    costs = {}
+    for m in (0.0, 1.0):
+        prob = Problem(case, body, vol, FitConfig(contact_margin=m))
+        with torch.no_grad():
+            costs[m] = float(prob.placed(_state(prob, case.truth))["contact"][0])
+    assert costs[1.0] == 0.0 < 1e-8 < costs[0.0]
+    assert FitConfig.preset("paper").contact_margin == 0.0
+    with pytest.raises(ValueError, match="contact_margin"):
+        FitConfig(contact_margin=-0.01)
+
+
 def test_presets_give_the_papers_weights_and_ours(body):
     """'paper': supp. D.1's lambdas (contact 1e5, normal 1e3, penetration 1e4 and 1e3 with the mesh SDF, scale 1e3),
     every variable free from the first step and no depth search; 'tuned' (the defaults): one penetration weight for

@@ -21,3 +21,12 @@ def test_a_wrong_grid_is_one_line_before_the_database_is_read(tmp_path, capsys, 
     err = capsys.readouterr().err
     assert rc == 2 and message in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "no_db").exists()
+
+
+@pytest.mark.parametrize("action", ["tune", "run"])
+def test_a_negative_contact_margin_is_one_line_before_the_database_is_read(tmp_path, capsys, action):
+    rc = cli_main(["hoi", action, "--contact-margin", "-0.01", "--db", str(tmp_path / "no_db"),
+                   "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--contact-margin" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "no_db").exists()
