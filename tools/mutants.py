@@ -321,9 +321,9 @@ MUTANTS = {
                              "common = list(seqs[a])[:min(len(seqs[a]), len(seqs[b]))]; seqs = {a: dict(zip(common, "
                              "seqs[a].values())), b: dict(zip(common, seqs[b].values()))}",
                              [T + "apps/motion/test_stats.py::test_pairs_match_sequences_not_list_order"]),
-    "paired_interval_of_the_wrong_level": ("apps/motion/stats.py", "confidence_level=confidence,",
+    "paired_interval_of_the_wrong_level": ("apps/stats.py", "confidence_level=confidence,",
                                            "confidence_level=confidence / 2,",
-                                           [T + "apps/motion/test_stats.py::test_interval_matches_normal_theory_on_a_large_sample"]),
+                                           [T + "apps/test_stats.py::test_interval_matches_normal_theory_on_a_large_sample"]),
     # the apps' outputs: bodies, meshes and figures a user takes away
     "selfpen_after_mesh_is_the_start": ("apps/selfpen/bodies.py", 'for what, output in (("before", before), ("after", after)):',
                                         'for what, output in (("before", before), ("after", before)):',
@@ -450,6 +450,14 @@ MUTANTS = {
     "hoi_contact_margin_not_passed": ("apps/hoi/problem.py", "tri_owner=self.tri_owner, margin=self.contact_margin)",
                                       "tri_owner=self.tri_owner)",
                                       [T + "apps/hoi/test_fit.py::test_contact_margin_reaches_every_pair_of_the_fit"]),
+    "paired_mean_ci_of_one_side": ("apps/stats.py", "    d = a - b\n", "    d = a\n",
+                                   [T + "apps/test_stats.py::test_paired_difference_is_the_interval_of_the_differences"]),
+    "egohmr_support_step_may_raise_j": ("apps/egohmr/guidance.py", "free=self.last <= 0, limit=self.last)",
+                                        "free=self.last <= 0, limit=None)",
+                                        [T + "apps/egohmr/test_support.py::test_a_support_step_that_would_push_the_body_into_a_wall_goes_straight_down"]),
+    "egohmr_support_no_vertical_fallback": ("apps/egohmr/guidance.py", 'if self.along == "free" or limit is not None:',
+                                            'if self.along == "free":',
+                                            [T + "apps/egohmr/test_support.py::test_a_support_step_that_would_push_the_body_into_a_wall_goes_straight_down"]),
 }
 
 

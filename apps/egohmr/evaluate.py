@@ -191,17 +191,17 @@ def by_activity(recs: list[dict]) -> dict:
             for a in acts}
 
 
-def paired_interval(recs: list[dict], base: list[dict], key: str = "mpjpe_mm", n: int = 2000,
-                    seed: int = 0) -> tuple[float, float, float]:
-    """Mean of the per-frame differences recs[key] - base[key] (the same frames, in order) and its 95 % bootstrap
-    interval (n resamples of the frames, percentiles 2.5 and 97.5); NaN where a frame has none (a diverged one)."""
-    a = np.array([r[key] for r in recs], np.float64) - np.array([r[key] for r in base], np.float64)
-    if len(recs) != len(base) or not len(a) or not np.isfinite(a).all():
+def paired_interval(recs: list[dict], base: list[dict], key: str = "mpjpe_mm") -> tuple[float, float, float]:
+    """Mean of the per-frame differences recs[key] - base[key] (the same frames, in order) and its 95 % BCa
+    bootstrap interval (volsmpl.apps.stats.paired_mean_ci); NaN where a frame has none (a diverged one) or the
+    lists differ in length."""
+    from volsmpl.apps.stats import paired_mean_ci
+
+    a = np.array([r[key] for r in recs], np.float64)
+    b = np.array([r[key] for r in base], np.float64)
+    if len(a) != len(b) or len(a) < 2 or not (np.isfinite(a).all() and np.isfinite(b).all()):
         return float("nan"), float("nan"), float("nan")
-    rng = np.random.default_rng(seed)
-    means = a[rng.integers(0, len(a), (n, len(a)))].mean(1)
-    lo, hi = np.percentile(means, [2.5, 97.5])
-    return float(a.mean()), float(lo), float(hi)
+    return paired_mean_ci(a, b)
 
 
 @torch.no_grad()

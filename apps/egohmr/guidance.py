@@ -24,7 +24,9 @@ The pelvis (the paper keeps the regressed one fixed; pelvis_step 0 and no suppor
 - `support` (support.SupportGap): after the pelvis step, each guided step moves the pelvis so that the body's
   lowest points rest on the scene's support below it (the gap g of support.py closed): always where they have sunk
   into it (g < 0), where they float (g > 0) only if J was 0 (a body that penetrates the scene elsewhere, e.g. a
-  seat, is not pulled down into it);
+  seat, is not pulled down into it); a support step may not raise J above its value before the guided step: along
+  the ray, a move that does is replaced by the vertical move of the same change of height, and that, if it does
+  too, by none (the ray of a body leaning on the wall behind it runs into that wall);
 - `along`: 'ray' (default) moves the pelvis only along the camera ray through it (the camera at the origin): the
   pelvis step is J's gradient projected on the ray, the support step the move along the ray that changes the height
   by -g (at most RAY_MAX, none where the ray is within 6 degrees of horizontal); 'free': the pelvis step in 3D and
@@ -96,25 +98,41 @@ class CollisionScore:
         return self.pelvis + self.offset
 
     @torch.no_grad()
-    def settle(self, x: torch.Tensor, free: torch.Tensor | None = None) -> torch.Tensor:
+    def settle(self, x: torch.Tensor, free: torch.Tensor | None = None,
+               limit: torch.Tensor | None = None) -> torch.Tensor:
         """One support step for poses x (B, 144): the pelvis moved by -g * up where the body has sunk into its
         support (g < 0), and where it floats (g > 0) only in the frames `free` (B,) bool (None: all); frames whose
-        pose is not finite stay. Returns `placed()`."""
-        if self.support is not None:
-            ok = torch.isfinite(x).all(-1)
-            safe = torch.where(ok[:, None], x, identity_pose(len(x), x.dtype, x.device))
-            g = self.support.gap(pose_body(self.body, self.betas, safe, self.placed()).vertices)
-            g = torch.where(torch.isfinite(g), g, 0.0)
-            move = ok & ((g < 0) | (True if free is None else free.to(ok.device)))
-            up = self.support.up.to(g.dtype)
-            if self.along == "ray":      # along the camera ray through the pelvis, by the same change of height
-                r = self._ray()
-                ru = (r * up).sum(-1)
-                run = torch.where(ru.abs() > 0.1, g / ru.abs().clamp_min(0.1), 0.0).clamp(-RAY_MAX, RAY_MAX)
-                shift = (run * torch.sign(ru))[:, None] * r
-            else:
-                shift = g[:, None] * up
-            self.offset = self.offset - torch.where(move[:, None], shift.to(self.offset.dtype), 0.0)
+        pose is not finite stay. limit (B,): the largest J a frame may have after the step (None: no check): a move
+        along the ray that ends above it is replaced by the vertical move of the same change of height, and that,
+        if it ends above it too, by none. Returns `placed()`."""
+        if self.support is None:
+            return self.placed()
+        ok = torch.isfinite(x).all(-1)
+        safe = torch.where(ok[:, None], x, identity_pose(len(x), x.dtype, x.device))
+        g = self.support.gap(pose_body(self.body, self.betas, safe, self.placed()).vertices)
+        g = torch.where(torch.isfinite(g), g, 0.0)
+        move = ok & ((g < 0) | (True if free is None else free.to(ok.device)))
+        if not bool(move.any()):
+            return self.placed()
+        up = self.support.up.to(g.dtype)
+        shifts = []
+        if self.along == "ray":      # along the camera ray through the pelvis, by the same change of height
+            r = self._ray()
+            ru = (r * up).sum(-1)
+            run = torch.where(ru.abs() > 0.1, g / ru.abs().clamp_min(0.1), 0.0).clamp(-RAY_MAX, RAY_MAX)
+            shifts.append((run * torch.sign(ru))[:, None] * r)
+        if self.along == "free" or limit is not None:  # 'free', or the fallback of a ray move that raised J
+            shifts.append(g[:, None] * up)
+        start, new, open_ = self.offset, self.offset, move
+        for shift in shifts:
+            cand = start - shift.to(start.dtype)
+            take = open_
+            if limit is not None:
+                self.offset = cand
+                take = take & (self.score(safe) <= limit.to(g.dtype))
+            new = torch.where(take[:, None], cand, new)
+            open_ = open_ & ~take
+        self.offset = new
         return self.placed()
 
     def _ray(self) -> torch.Tensor:
@@ -185,7 +203,7 @@ class CollisionScore:
             else:
                 (g,) = torch.autograd.grad(total, x)
         if self.support is not None:
-            self.settle(torch.where(ok, x.detach(), float("nan")), free=self.last <= 0)
+            self.settle(torch.where(ok, x.detach(), float("nan")), free=self.last <= 0, limit=self.last)
         if self.joints == "legs":
             g = g * leg_mask(g.dtype, g.device)
         return torch.where(ok, g, 0.0)

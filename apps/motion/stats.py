@@ -4,7 +4,7 @@ A walk's optimisation is chaotic: the same code on two CPUs (other float roundin
 local optima (README, "apps/motion"), so one sequence's outcome is one draw and two rows of the table differ by
 more than their code does. Every model walks the same start/goal pairs, so the honest comparison pairs them: per
 sequence the difference of a metric between two models, its mean and a bootstrap confidence interval of that mean
-(scipy.stats.bootstrap, BCa), and how often each model did better (all metrics here: lower is better).
+(volsmpl.apps.stats.mean_ci: scipy's BCa bootstrap), and how often each model did better (all metrics here: lower is better).
 
     runs = compared_runs(result)                         # label -> sequence records (results.json's cases)
     table = paired_differences(runs)                     # {'pairs': [{'a', 'b', 'n', 'metrics': {...}}], ...}
@@ -13,15 +13,14 @@ sequence the difference of a metric between two models, its mean and a bootstrap
 from __future__ import annotations
 
 import argparse
-import inspect
 import itertools
 import json
 import sys
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
 
+from volsmpl.apps.stats import mean_ci
 from volsmpl.apps.table import case_records
 from volsmpl.io.outputs import write_atomic
 from volsmpl.io.provenance import machine_info
@@ -30,22 +29,6 @@ from .summary import compared_weight
 
 #: the outcome metrics compared (lower is better for each)
 METRICS = ("collision_cm", "collision_frames_pct", "goal_dist_m", "foot_skate_cm")
-#: scipy >= 1.15 seeds bootstrap with `rng`, older releases with `random_state`
-_SEED_ARG = "rng" if "rng" in inspect.signature(stats.bootstrap).parameters else "random_state"
-
-
-def mean_ci(x, confidence: float = 0.95, n_resamples: int = 10000, seed: int = 0) -> tuple[float, float]:
-    """BCa bootstrap confidence interval of the mean of x (1-D); (v, v) when every value is v (no spread to resample).
-
-    Shape: x (N,), N >= 2."""
-    x = np.asarray(x, dtype=np.float64)
-    if x.ndim != 1 or x.size < 2 or not np.all(np.isfinite(x)):
-        raise ValueError(f"a confidence interval needs >= 2 finite values in one dimension, got shape {x.shape}")
-    if np.all(x == x[0]):
-        return float(x[0]), float(x[0])
-    res = stats.bootstrap((x,), np.mean, confidence_level=confidence, n_resamples=n_resamples, method="BCa",
-                          **{_SEED_ARG: np.random.default_rng(seed)})
-    return float(res.confidence_interval.low), float(res.confidence_interval.high)
 
 
 def _by_sequence(records: list) -> dict:

@@ -181,6 +181,45 @@ def test_along_the_ray_the_support_step_keeps_the_pelvis_on_its_ray(body, mesh_v
     assert float(moved @ UP) > 0                                         # out of the floor
 
 
+def _wall_case(body, gap: float = 0.003):
+    """The body of the ray test floating 5 cm above a floor, with a wall `gap` beyond its farthest point along
+    the view (un-turned z): the ray through the pelvis runs into it. Returns (pose, pelvis, floor + wall points,
+    the un-turned vertices)."""
+    x = _turned_pose()
+    pelvis = (TURN @ torch.tensor([0.3, -1.0, 2.5]))[None]
+    with torch.no_grad():
+        v = pose_body(body, torch.zeros(1, 10), x, pelvis).vertices[0] @ TURN  # un-turned
+    low = float(v[:, 1].min())
+    floor = _plane(low - 0.05, half=0.5, step=0.015, centre=(0.3, 2.5))
+    u = torch.arange(-0.6, 0.6 + 1e-9, 0.015)
+    a, b = torch.meshgrid(u + 0.3, torch.arange(0.0, 1.8, 0.015) + low - 0.04, indexing="ij")
+    wall = torch.stack([a.flatten(), b.flatten(), torch.full_like(a.flatten(), float(v[:, 2].max()) + gap)], -1)
+    return x, pelvis, torch.cat([floor, wall @ TURN.T]), v
+
+
+def test_a_support_step_that_would_push_the_body_into_a_wall_goes_straight_down(body, mesh_volume):
+    """A body floating 5 cm above a floor with a wall 3 mm beyond it along the view (a person leaning on the wall
+    behind them, seen from the front): the move along the ray that lowers it 5 cm goes 12 cm into the wall, so it
+    is replaced by the vertical move, which lowers it 5 cm and leaves it touching nothing; with a block of points
+    under its feet the vertical move penetrates too, and the body stays."""
+    x, pelvis, pts, v = _wall_case(body)
+    sc = _score(body, mesh_volume, pts, support=True, along="ray", pelvis=pelvis)
+    sc.gradient(x, x, 0)
+    assert float(sc.last[0]) == 0.0
+    assert torch.allclose(sc.offset[0], -0.05 * UP, atol=1e-4)
+    assert float(sc.score(x)[0]) == 0.0
+    lowest = v[int(v[:, 1].argmin())]
+    g = torch.Generator().manual_seed(0)
+    block = lowest + torch.tensor([0.0, -0.03, 0.0]) + 0.02 * (torch.rand(200, 3, generator=g) - 0.5)
+    sc = _score(body, mesh_volume, torch.cat([pts, block @ TURN.T]), support=True, along="ray", pelvis=pelvis)
+    sc.gradient(x, x, 0)
+    assert float(sc.last[0]) == 0.0 and torch.allclose(sc.offset, torch.zeros(1, 3))
+    far = _score(body, mesh_volume, _wall_case(body, gap=0.5)[2], support=True, along="ray", pelvis=pelvis)
+    far.gradient(x, x, 0)    # the wall 50 cm away: the ray move stays out of it and is kept
+    ray = pelvis[0] / pelvis[0].norm()
+    assert float(torch.linalg.cross(far.offset[0], ray).norm()) < 1e-5 and float(far.offset[0] @ UP) < -0.049
+
+
 def test_pelvis_flags_are_checked(tmp_path, capsys):
     from volsmpl.cli import main
 

@@ -15,25 +15,6 @@ def _rec(model, w, scene, seq, **metrics):
     return {"model": model, "w": w, "scene": scene, "sequence": seq, "metrics": {**base, **metrics}}
 
 
-def test_constant_values_give_a_point_interval():
-    assert S.mean_ci([0.25, 0.25, 0.25]) == (0.25, 0.25)
-
-
-def test_interval_matches_normal_theory_on_a_large_sample():
-    x = np.random.default_rng(3).normal(1.0, 2.0, 4000)
-    lo, hi = S.mean_ci(x, n_resamples=4000)
-    half = 1.959964 * x.std(ddof=1) / np.sqrt(x.size)
-    assert lo == pytest.approx(x.mean() - half, abs=0.1 * half)
-    assert hi == pytest.approx(x.mean() + half, abs=0.1 * half)
-
-
-def test_interval_refuses_too_few_or_non_finite_values():
-    with pytest.raises(ValueError, match=">= 2 finite"):
-        S.mean_ci([1.0])
-    with pytest.raises(ValueError, match=">= 2 finite"):
-        S.mean_ci([1.0, float("nan")])
-
-
 def test_pairs_match_sequences_not_list_order():
     a = [_rec("volsmpl", 1.0, "r", k, collision_cm=v) for k, v in enumerate([1.0, 2.0, 3.0])]
     b = [_rec("coap", 0.1, "other", 0, collision_cm=9.0)]            # walked by b only: not compared
