@@ -210,8 +210,10 @@ def staleness(path: Path, prov: dict, section: Section, git: Git) -> tuple[str, 
     base = (f" with the code of {check['baseline']['commit']} on one machine ({check['machine']['cpu']}; the table's "
             f"machine: {check['machine']['stored_cpu']}), whose own check at {check['chained_from']['fresh_commit']} "
             f"agreed with the table") if check.get("baseline") else ""
+    added = (f"; {check['n_added']} values only the re-run records, fields the table predates (e.g. "
+             f"{', '.join(check.get('added', [])[:3])})") if check.get("n_added") else ""
     return "current", (f"re-run check at {at} (not before the producer's last change): {check['cases_compared']} of "
-                       f"{check['cases_total']} cases made again, all {check['values_compared']} values agree{base} "
+                       f"{check['cases_total']} cases made again, all {check['values_compared']} values agree{base}{added} "
                        f"(rel. {check['rel_tol']:g}; times and memory are not compared); {why}")
 
 

@@ -4,7 +4,8 @@ A table that took hours (an app's `results.json`) is stale for `volsmpl report` 
 changes, even when the change cannot touch its numbers (a new check of user input, say). Rather than take that on
 trust, re-run a few of its cases with the current code and compare: `compare_results` matches the per-case records
 of the stored result and of the fresh run (by their identifying fields: model, w, scene, sequence, name, frame) and
-compares every value the fresh run has, except times and memory (`IGNORED`, they differ between any two runs);
+compares every value both hold, except times and memory (`IGNORED`, they differ between any two runs; a value only
+the fresh run holds, a field later code adds, is listed, one only the table holds is a mismatch);
 `write_check` stores the comparison beside the result as `<result>.check.json`, with the sha256 of the result file,
 so that it never vouches for another one. The report then calls the result current when the check agrees, was made
 at or after the producer's last change and names this very file (`check_for`).
@@ -96,7 +97,9 @@ def compare_results(stored: dict, fresh: dict, rel_tol: float = 1e-6, abs_tol: f
     """Compare the per-case records of a fresh run (a subset of the cases) with the stored result's.
 
     Returns {'agree', 'cases_compared', 'cases_total', 'values_compared', 'max_abs_diff', 'mismatches' (the first 10:
-    case, value, stored, fresh), 'missing' (fresh cases the stored result lacks), 'rel_tol', 'abs_tol'}.
+    case, value, stored, fresh), 'missing' (fresh cases the stored result lacks), 'added' (the first 10 names) and
+    'n_added': values of shared cases that only the fresh run records (fields later code adds: not compared, listed),
+    'rel_tol', 'abs_tol'}. A value of a shared case that the stored result has and the fresh run lacks is a mismatch.
     ValueError (one line) when either has no 'cases' or they share no case."""
     for name, d in (("stored", stored), ("fresh", fresh)):
         if not isinstance(d, dict) or not d.get("cases"):
@@ -107,9 +110,12 @@ def compare_results(stored: dict, fresh: dict, rel_tol: float = 1e-6, abs_tol: f
     if not common:
         raise ValueError(f"the fresh run shares no case with the stored result (fresh: {sorted(new_cases)[:3]} ..., "
                          f"stored: {sorted(old_cases)[:3]} ...): re-run cases of the stored table")
-    mismatches, worst, n = [], 0.0, 0
+    mismatches, added, worst, n = [], [], 0.0, 0
     for (case, path), v in sorted(new.items(), key=lambda kv: kv[0]):
         if case not in old_cases:
+            continue
+        if (case, path) not in old:  # a value later code records and the table predates: nothing to disagree with
+            added.append(path)
             continue
         n += 1
         s = old.get((case, path), "<absent>")
@@ -117,10 +123,14 @@ def compare_results(stored: dict, fresh: dict, rel_tol: float = 1e-6, abs_tol: f
         if d is not None:
             worst = max(worst, d)
             mismatches.append({"case": case, "value": path, "stored": s, "fresh": v})
+    for (case, path), s in sorted(old.items(), key=lambda kv: kv[0]):  # a value of the table the code no longer makes
+        if case in new_cases and (case, path) not in new:
+            n += 1
+            mismatches.append({"case": case, "value": path, "stored": s, "fresh": "<absent>"})
     return {"agree": not mismatches and n > 0, "cases_compared": len(common), "cases_total": len(old_cases),
             "values_compared": n, "max_abs_diff": worst if mismatches else 0.0, "mismatches": mismatches[:10],
-            "n_mismatches": len(mismatches), "missing": sorted(new_cases - old_cases)[:10], "rel_tol": rel_tol,
-            "abs_tol": abs_tol}
+            "n_mismatches": len(mismatches), "missing": sorted(new_cases - old_cases)[:10],
+            "added": sorted(set(added))[:10], "n_added": len(added), "rel_tol": rel_tol, "abs_tol": abs_tol}
 
 
 def check_path(result: Path) -> Path:

@@ -61,6 +61,22 @@ def test_compare_agrees_on_same_values_other_timings_and_names_a_difference():
         compare_results({"summary": {}}, fresh_of("a"))
 
 
+def test_a_value_only_the_fresh_run_records_is_listed_and_one_it_lacks_is_a_mismatch():
+    """Later code may record more per case (a status, a stop rule): those values have nothing in the table to
+    disagree with and are listed, not compared; a value of the table that the fresh run no longer makes is a
+    mismatch."""
+    f = fresh_of("a")
+    for r in f["cases"]["volsmpl"] + f["cases"]["mesh"]:
+        r["after"]["stop"] = "max_iters"
+    c = compare_results(STORED, f)
+    assert c["agree"] and c["values_compared"] == 10 and c["n_added"] == 2 and c["added"] == ["after/stop"]
+    del f["cases"]["mesh"][0]["after"]["contact_cm"]
+    c = compare_results(STORED, f)
+    assert not c["agree"] and c["n_mismatches"] == 1 and c["values_compared"] == 10
+    assert c["mismatches"][0] == {"case": "model=mesh|name=a", "value": "after/contact_cm", "stored": 3.0,
+                                  "fresh": "<absent>"}
+
+
 def write(path: Path, data) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(data))
