@@ -62,8 +62,9 @@ def add_parser(sub):
     p.add_argument("--n", type=int, default=100, help="with make-db: number of cases")
     p.add_argument("--preset", default="tuned", choices=sorted(PRESETS),
                    help="weights and schedule: 'tuned' (ours: normal 1e2, penetration 1e5, the object moved along its "
-                        "camera ray first, its rotation held for 40 %% of the steps) or 'paper' (normal 1e3, "
-                        "penetration 1e4, 1e3 with the exact mesh, every variable from the first step)")
+                        "camera ray first, its rotation held for 40 %% of the steps, a contact within 1 cm counted as touching) "
+                        "or 'paper' (normal 1e3, penetration 1e4, 1e3 with the exact mesh, every variable from the "
+                        "first step)")
     p.add_argument("--iters", type=int, default=d.iters, help=f"optimisation steps (paper {d.iters})")
     p.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate (paper {d.lr:g})")
     p.add_argument("--w-keypoints", type=float, default=d.w_keypoints, help="weight of the keypoint term (tuned)")
