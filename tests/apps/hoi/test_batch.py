@@ -71,7 +71,11 @@ def test_a_batch_of_cases_fits_each_case_as_alone(kind, two_cases):
     body, cases = two_cases
     assert len({len(c.contacts) for c in cases}) == 2 or cases[0].category != cases[1].category
     vol = volsmpl.attach_volume(body, model=kind)
-    cfg = FitConfig(iters=12)
+    # no contact margin: within it the contact's gradient is exactly 0, and Adam's normalised steps turn the float32
+    # rounding of what remains (another summation order in a batch) into steps of up to lr (measured with the
+    # preset's 1 cm: translations 2.7e-4 apart with volsmpl, rotations 1e-3 with the mesh); what is tested is the
+    # batching, which the margin (per pair, elementwise) does not touch
+    cfg = FitConfig(iters=12, contact_margin=0.0)
     both = fit_cases(cases, body, vol, cfg)
     for case, r in zip(cases, both):
         a = fit_case(case, body, vol, cfg)
