@@ -125,6 +125,8 @@ class CollisionScore:
             shifts.append(g[:, None] * up)
         start, new, open_ = self.offset, self.offset, move
         for shift in shifts:
+            if not bool(open_.any()):  # every moving frame took an earlier move
+                break
             cand = start - shift.to(start.dtype)
             take = open_
             if limit is not None:
