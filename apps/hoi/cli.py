@@ -200,9 +200,15 @@ def check_options(args) -> None:
     number(args.batch, "--batch", lo=1, what="cases optimised together")
 
 
-def margin_override(args) -> dict:
-    """{'contact_margin': --contact-margin} when given, else {} (the preset's margin)."""
-    return {} if args.contact_margin is None else {"contact_margin": args.contact_margin}
+def fit_config(args):
+    """The FitConfig of the options: --preset's weights with the fit flags on top (--contact-margin only when
+    given: else the preset's margin)."""
+    from .fit import FitConfig
+
+    margin = {} if args.contact_margin is None else {"contact_margin": args.contact_margin}
+    return FitConfig.preset(args.preset, iters=args.iters, lr=args.lr, w_keypoints=args.w_keypoints,
+                            w_silhouette=args.w_silhouette, contact_fraction=args.contact_fraction,
+                            contact_huber=args.contact_huber, device=args.device, **margin)
 
 
 def check_data(cases: list, body, device: str, warnings: list) -> None:
@@ -243,7 +249,7 @@ def run(args) -> int:
         parse_grid(args.grid)  # a wrong --grid stops here, before the database is read
         cases = _cases(args, "tune", database)
         with claim_out(args.out, "hoi"):
-            return run_tune(args, cases)
+            return run_tune(args, cases, fit_config(args))
     models, ckpts = check_common(args)
     with claim_out(args.out, "hoi"):
         return _run(args, models, ckpts)
@@ -278,13 +284,11 @@ def _run(args, models: list, ckpts: dict) -> int:
     from volsmpl.apps.hoi import database
     from .case import case_to_dict, load_case, mesh_digest
     from .figures import case_panel, summary_plot
-    from .fit import FitConfig, Problem, fit_cases
+    from .fit import Problem, fit_cases
 
     split = args.split or "test"
     out = Path(args.out)
-    cfg = FitConfig.preset(args.preset, iters=args.iters, lr=args.lr, w_keypoints=args.w_keypoints,
-                           w_silhouette=args.w_silhouette, contact_fraction=args.contact_fraction,
-                           contact_huber=args.contact_huber, device=args.device, **margin_override(args))
+    cfg = fit_config(args)
     if args.action == "fit":
         if not args.case:
             raise ValueError("'volsmpl hoi fit' needs --case FILE (a case file, format in apps/hoi/case.py)")

@@ -62,10 +62,10 @@ def parse_grid(specs: list) -> dict:
     return grid
 
 
-def run_tune(args, cases: list) -> int:
+def run_tune(args, cases: list, base) -> int:
     """`volsmpl hoi tune`: every combination of the --grid weights, every kind of --model fitting `cases` (the
-    tuning half's selection, --batch at a time) at FitConfig's defaults otherwise; writes OUT/tune.json after every
-    setting."""
+    tuning half's selection, --batch at a time) at `base` (the options' FitConfig) otherwise; writes OUT/tune.json
+    after every setting."""
     import itertools
 
     import volsmpl
@@ -73,15 +73,12 @@ def run_tune(args, cases: list) -> int:
     from volsmpl.apps.table import check_common, checkpoint_names, volumes, write_results
 
     from .console import case_line
-    from .fit import FitConfig, fit_cases
+    from .fit import fit_cases
 
     grid = parse_grid(args.grid)
     models, ckpts = check_common(args)
     body = volsmpl.create_body().to(args.device)
     vols = volumes(body, models, ckpts, args.device)
-    base = FitConfig.preset(args.preset, iters=args.iters, lr=args.lr, contact_fraction=args.contact_fraction,
-                            contact_huber=args.contact_huber, device=args.device,
-                            **({} if args.contact_margin is None else {"contact_margin": args.contact_margin}))
     settings = [dict(zip(grid, values)) for values in itertools.product(*grid.values())]
     cfgs = [replace(base, **setting) for setting in settings]  # every setting checked before the first fit
     rows = []
