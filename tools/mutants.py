@@ -466,6 +466,19 @@ MUTANTS = {
     "egohmr_support_no_vertical_fallback": ("apps/egohmr/guidance.py", 'if self.along == "free" or limit is not None:',
                                             'if self.along == "free":',
                                             [T + "apps/egohmr/test_support.py::test_a_support_step_that_would_push_the_body_into_a_wall_goes_straight_down"]),
+    "refiner_onehot_of_slots": ("core/nn/code_refiner.py",
+                                "ids = torch.arange(self.num_parts, device=z.device) if parts is None else parts",
+                                "ids = torch.arange(self.num_parts, device=z.device)[:Kc]",
+                                [T + "nn/test_code_refiner.py::test_refining_some_parts_gives_the_codes_of_refining_all"]),
+    "refiner_gradient_of_the_codes_sum": ("core/nn/code_refiner.py",
+                                          "(g,) = torch.autograd.grad(refinement_losses(net.output, pred, target).sum(), zg)",
+                                          "(g,) = torch.autograd.grad(pred.sum(), zg)",
+                                          [T + "nn/test_code_refiner.py::test_the_refiner_reads_the_gradient_of_each_parts_loss"]),
+    "refiner_training_moves_every_weight": ("core/train/loop.py", "        volume.net.requires_grad_(False)\n", "",
+                                            [T + "nn/test_code_refiner.py::test_training_only_the_refiner_leaves_the_encoder_and_decoders"]),
+    "refiner_not_applied": ("core/volume/learned.py",
+                            "z = self.net.refiner(self.net, z, xin, target, sc, parts)", "pass",
+                            [T + "nn/test_code_refiner.py::test_refining_some_parts_gives_the_codes_of_refining_all"]),
 }
 
 

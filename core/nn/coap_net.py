@@ -164,6 +164,7 @@ class CoapNet(nn.Module):
 
     kind = "coap"
     output = "occupancy"
+    refiner = None  # no learned code refinement (volsmpl.nn.code_refiner) in this model
     TILE_ROWS = 2048  # rows per cache tile on the no-grad path (1 CPU thread, 100k pairs: ~1.4x faster than untiled)
 
     def __init__(self, num_parts: int, config: Optional[CoapConfig] = None):

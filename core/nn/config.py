@@ -63,6 +63,11 @@ class VolumeConfig(JsonConfig):
             point: False, the default). A 64-wide decoder reading a hand's +-5 cm coordinates must first grow
             its weights ~20x; measured from scratch (batch 2, 250 steps, same data, held-out batch of 4
             bodies): MSE 1.06e-4 vs 1.79e-4, wrong signs 23.0 % vs 27.7 %, IoU 0.59 vs 0.54.
+        refiner_iters: passes of the learned code refinement after the encoder (`volsmpl.nn.code_refiner`; not in
+            the paper: 0, the default, is its encoder alone). Each pass corrects the part codes from the gradient of
+            the part's refinement loss and a PointNet summary of its decoder's residuals at its own surface points.
+        refiner_hidden: width of the refiner's residual PointNet.
+        refiner_blocks: ResNet blocks of the refiner's residual PointNet.
     """
 
     latent_dim: int = 128
@@ -78,16 +83,19 @@ class VolumeConfig(JsonConfig):
     box_padding: float = 0.125
     nbw_shared_shapes: bool = True
     normalize_parts: bool = False
+    refiner_iters: int = 0
+    refiner_hidden: int = 64
+    refiner_blocks: int = 3
 
     def __post_init__(self):
         self.skip_layers = tuple(int(s) for s in self.skip_layers)
         positive = ("latent_dim", "encoder_hidden", "encoder_blocks", "n_surface_samples", "encoder_draws",
-                    "decoder_hidden", "decoder_layers")
+                    "decoder_hidden", "decoder_layers", "refiner_hidden", "refiner_blocks")
         for name in positive:
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"VolumeConfig.{name} must be a positive integer, got {v!r}")
-        for name in ("pe_levels", "nbw_rank"):
+        for name in ("pe_levels", "nbw_rank", "refiner_iters"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 0:
                 raise ValueError(f"VolumeConfig.{name} must be a non-negative integer, got {v!r}")

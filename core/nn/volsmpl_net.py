@@ -1,4 +1,5 @@
-"""The VolumetricSMPL network: shared ResNet-PointNet part encoder + NBW-generated SDF decoders.
+"""The VolumetricSMPL network: shared ResNet-PointNet part encoder + NBW-generated SDF decoders, and optionally a
+learned refinement of the encoder's codes (`refiner`, VolumeConfig.refiner_iters; volsmpl.nn.code_refiner).
 
 Body-agnostic: K (number of parts) comes from the body's partition, the rest from VolumeConfig.
 """
@@ -9,6 +10,7 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
+from .code_refiner import LearnedCodeRefiner
 from .config import VolumeConfig
 from .nbw import NBWDecoder, NBWWeights
 from .pointnet import ResnetPointNet
@@ -38,6 +40,9 @@ class VolumetricSMPLNet(nn.Module):
         self.num_parts = num_parts
         self.encoder = ResnetPointNet.from_config(self.config)
         self.decoder = NBWDecoder.from_config(self.config, num_parts, share_shapes=self.config.nbw_shared_shapes)
+        c = self.config
+        self.refiner = (LearnedCodeRefiner(num_parts, c.latent_dim, c.refiner_hidden, c.refiner_blocks, c.refiner_iters)
+                        if c.refiner_iters else None)   # applied by the volume, which has the refinement points
         # bfloat16 autocast of the PointNet encoder (float32 inputs only): ~3x faster on CPUs with
         # AVX512-BF16; used for training throughput, off by default (inference stays float32).
         self.encoder_bf16 = False

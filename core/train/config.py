@@ -58,6 +58,8 @@ class TrainConfig:
     keep_every: int = 0             # > 0: never prune checkpoints whose step is a multiple of this (for later evaluation)
     num_threads: int = 0            # torch CPU threads (0: leave torch's default)
     num_workers: int = 0            # processes that make batches ahead of the step (0: in the training process)
+    train_weights: str = "all"      # 'all', or 'refiner': only the learned code refinement's weights (model.refiner_iters
+                                    # > 0) train, the encoder and decoders stay as --init gave them
     model_kind: str = "volsmpl"     # 'volsmpl' (SDF, eq. 3) or 'coap' (occupancy baseline, binary cross-entropy)
     model: object = field(default_factory=VolumeConfig)  # VolumeConfig, or CoapConfig for model_kind 'coap'
 
@@ -87,6 +89,11 @@ class TrainConfig:
             if self.model != VolumeConfig():
                 raise ValueError(f"model_kind={self.model_kind!r} needs a {cls.__name__} as model, got a {type(self.model).__name__}.")
             self.model = cls()
+        if self.train_weights not in ("all", "refiner"):
+            raise ValueError(f"train_weights must be 'all' or 'refiner', got {self.train_weights!r}")
+        if self.train_weights == "refiner" and not getattr(self.model, "refiner_iters", 0):
+            raise ValueError("train_weights='refiner' trains the learned code refinement, but the model has none: "
+                             "set model.refiner_iters >= 1 (a VolumetricSMPL model), or train_weights='all'.")
 
     def to_dict(self) -> dict:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
@@ -136,6 +143,26 @@ def same_weights_config(held: dict, model) -> bool:
     except (TypeError, ValueError):   # another kind's config, or keys this release does not know
         return False
     return dataclasses.replace(held_cfg, encoder_draws=model.encoder_draws) == model
+
+
+REFINER_FIELDS = ("refiner_iters", "refiner_hidden", "refiner_blocks")
+
+
+def adds_refiner(held: dict, model) -> bool:
+    """Whether `model` is a checkpoint's model config `held` with a learned code refinement added: the checkpoint
+    has none (refiner_iters 0), `model` has one, and every other field of `same_weights_config` is equal. Its
+    encoder and decoders then load from the checkpoint and the refiner starts fresh (an untrained refiner leaves
+    the codes as they are)."""
+    if not getattr(model, "refiner_iters", 0):
+        return False
+    try:
+        held_cfg = type(model).from_dict(held)
+    except (TypeError, ValueError):
+        return False
+    if held_cfg.refiner_iters:
+        return False
+    keep = {f: getattr(model, f) for f in REFINER_FIELDS}
+    return dataclasses.replace(held_cfg, encoder_draws=model.encoder_draws, **keep) == model
 
 
 def check_numbers(cfg: "TrainConfig") -> None:

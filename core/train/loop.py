@@ -72,7 +72,7 @@ from volsmpl.io.checkpoint import load_checkpoint
 from volsmpl.volume.models import model_kind
 from volsmpl.io.outputs import exclusive_folder, write_atomic
 from volsmpl.train.batches import StepProfile, batch_stream, write_profile
-from volsmpl.train.config import TrainConfig, lr_at, parse_set, read_config_file, same_weights_config
+from volsmpl.train.config import TrainConfig, adds_refiner, lr_at, parse_set, read_config_file, same_weights_config
 from volsmpl.train.state import latest_checkpoint, load_optimizer, read_training_state, save_training_state
 
 
@@ -264,10 +264,13 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
         print(f"--init {init} is not used: --resume continues {out_dir} from its checkpoint {ck.name}", file=sys.stderr)
     if init is not None and ck is None:
         state, cfg_dict, meta = load_checkpoint(init, expected_fingerprint=volume.fingerprint)
-        if not same_weights_config(cfg_dict, cfg.model):
+        fresh_refiner = adds_refiner(cfg_dict, cfg.model)
+        if not (same_weights_config(cfg_dict, cfg.model) or fresh_refiner):
             raise ValueError(f"{init} holds model config {cfg_dict}, not the training config's {cfg.model.to_dict()}; "
                              f"pass a --config whose 'model' is the checkpoint's (its JSON's meta.training.train_config, "
-                             f"which a plain --init uses).")
+                             f"which a plain --init uses), or it with refiner_iters >= 1 added.")
+        if fresh_refiner:   # the checkpoint's encoder and decoders, a new (identity) refiner
+            state = {**{f"refiner.{k}": v for k, v in volume.net.refiner.state_dict().items()}, **state}
         volume.net.load_state_dict(state)
         start = int(meta.get("training", {}).get("step", 0))
         spent = float(meta.get("training", {}).get("train_seconds", 0.0))
@@ -288,7 +291,11 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
                            device=None if cfg.num_workers else device)  # made on the device unless by CPU workers
     volume.to(device)
     volume.train()
-    opt = torch.optim.Adam(volume.net.parameters(), lr=lr_at(cfg, 0))  # after the move: its state lives on the device
+    if cfg.train_weights == "refiner":   # the encoder and decoders stay fixed (no gradients computed for them)
+        volume.net.requires_grad_(False)
+        volume.net.refiner.requires_grad_(True)
+    trained = [p for p in volume.net.parameters() if p.requires_grad]
+    opt = torch.optim.Adam(trained, lr=lr_at(cfg, 0))  # after the move: its state lives on the device
     if saved is not None:
         load_optimizer(opt, *saved["optimizer"])
     ema = WeightEMA(volume.net, cfg.ema_decay, ema_state, ema_updates) if cfg.ema_decay else None

@@ -11,8 +11,8 @@ So `refine_codes` takes R steps of Adam on z (cosine-decayed step size from REFI
 its own points: the partition's fixed tight-face samples (`Partition.tight_samples`, those the encoder reads),
 each moved by +t and -t along its posed face normal, t ~ N(0, REFINE_SIGMA^2) from a fixed seed (deterministic,
 smooth in pose). The loss per (body, part) is the training objective's form on those points: for SDF models
-REFINE_SIGN_WEIGHT softplus(-sgn(t) d / REFINE_TAU) + REFINE_ABS_WEIGHT (d - t)^2 (the training configs'
-weights), for occupancy models (COAP) the binary cross-entropy of the occupancy against t < 0; means over the
+0.25 softplus(-sgn(t) d / 1 mm) + 1e4 (d - t)^2 (the training configs' weights), for occupancy models (COAP) the
+binary cross-entropy of the occupancy against t < 0 (`volsmpl.nn.code_refiner.refinement_losses`); means over the
 part's points, summed over parts and bodies, so each part's code follows its own loss alone (Adam is per
 coordinate): refining some parts gives the same codes as refining all.
 
@@ -27,6 +27,8 @@ import math
 
 import torch
 
+from volsmpl.nn.code_refiner import decode_targets, refinement_losses
+
 __all__ = ["REFINE_LR", "REFINE_SIGMA", "refinement_points", "refine_codes", "check_refine_steps"]
 
 #: Adam's initial step size on z (cosine-decayed to 0 over the steps)
@@ -35,10 +37,6 @@ REFINE_LR = 1e-2
 REFINE_SIGMA = 0.003
 #: seed of the fixed offsets
 REFINE_SEED = 20260127
-#: the SDF loss's weights (those of the training configs, checkpoints/volsmpl_b8r.json)
-REFINE_ABS_WEIGHT = 1e4
-REFINE_SIGN_WEIGHT = 0.25
-REFINE_TAU = 1e-3
 
 
 def check_refine_steps(steps) -> int:
@@ -77,15 +75,6 @@ def refinement_points(partition, vertices: torch.Tensor, G: torch.Tensor, center
     return local, t, scale
 
 
-def _part_losses(net, pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Per-(body, part) losses (B, K') of predictions and targets (B, K', m)."""
-    if net.output == "sdf":
-        sign = torch.nn.functional.softplus(-torch.sign(target) * pred / REFINE_TAU)
-        return (REFINE_SIGN_WEIGHT * sign + REFINE_ABS_WEIGHT * (pred - target).square()).mean(dim=-1)
-    label = (target < 0).to(pred.dtype)
-    return torch.nn.functional.binary_cross_entropy(pred.clamp(1e-6, 1 - 1e-6), label, reduction="none").mean(dim=-1)
-
-
 def refine_codes(net, z: torch.Tensor, xin: torch.Tensor, target: torch.Tensor, scale, parts, steps: int,
                  lr: float = REFINE_LR) -> torch.Tensor:
     """z + delta: the codes after `steps` Adam steps on the parts' refinement losses (module docstring), the
@@ -96,19 +85,13 @@ def refine_codes(net, z: torch.Tensor, xin: torch.Tensor, target: torch.Tensor, 
     """
     if check_refine_steps(steps) == 0 or z.shape[1] == 0:
         return z
-    B, Kc, m = target.shape
-    b = torch.arange(B, device=z.device).repeat_interleave(Kc * m)
-    k = torch.arange(Kc, device=z.device).repeat_interleave(m).repeat(B)
-    x = xin.reshape(-1, 3)
     var = z.detach().clone().requires_grad_(True)
     m1, m2 = torch.zeros_like(var), torch.zeros_like(var)
     beta1, beta2, eps = 0.9, 0.999, 1e-8
     with torch.enable_grad():
         for i in range(steps):
-            pred = net.decode_pairs(x, b, k, net.code_from_z(var, parts)).view(B, Kc, m)
-            if scale is not None and net.output == "sdf":
-                pred = pred * scale
-            (grad,) = torch.autograd.grad(_part_losses(net, pred, target).sum(), var)
+            pred = decode_targets(net, var, xin, scale, parts)
+            (grad,) = torch.autograd.grad(refinement_losses(net.output, pred, target).sum(), var)
             m1.mul_(beta1).add_(grad, alpha=1 - beta1)
             m2.mul_(beta2).addcmul_(grad, grad, value=1 - beta2)
             step_lr = lr * 0.5 * (1 + math.cos(math.pi * i / steps))

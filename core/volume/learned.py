@@ -152,9 +152,10 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
 
     def _replays(self, out) -> bool:
         """Whether the encode of `out` (with the fixed surface samples) is a CUDA-graph replay: cuda_graphs on, a
-        CUDA output, autograd off (EncodeGraphs.supports), no code refinement; a key whose capture failed is then
+        CUDA output, autograd off (EncodeGraphs.supports), no code refinement (fitted or learned); a key whose capture failed is then
         encoded eagerly."""
-        return self.cuda_graphs and not self.refine_steps and self.encode_graphs.supports(out)
+        return (self.cuda_graphs and not self.refine_steps and self.net.refiner is None
+                and self.encode_graphs.supports(out))
 
     def _encode_eager(self, out, generator, parts: torch.Tensor | None = None, frames=None,
                       code_grad: bool = True) -> Encoding:
@@ -180,9 +181,13 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
                 local = (local - cs[:, :, None]) / ss[:, :, None]
             with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
                 z = self.net.encode_z(local, parts, draws=p.draws)
-                if self.refine_steps and generator is None and not self.training:
+                fit = bool(self.refine_steps) and generator is None and not self.training
+                if self.net.refiner is not None or fit:
                     xin, target, sc = refinement_points(p, v, Gs, cs, ss, parts)
-                    z = refine_codes(self.net, z, xin, target, sc, parts, self.refine_steps)
+                    if self.net.refiner is not None:   # the learned passes, also in training
+                        z = self.net.refiner(self.net, z, xin, target, sc, parts)
+                    if fit:
+                        z = refine_codes(self.net, z, xin, target, sc, parts, self.refine_steps)
                 code = self.net.code_from_z(z, parts)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, center=center,
                         scale=scale, parts=parts, slot=slot)
