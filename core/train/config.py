@@ -149,19 +149,20 @@ REFINER_FIELDS = ("refiner_iters", "refiner_hidden", "refiner_blocks")
 
 
 def adds_refiner(held: dict, model) -> bool:
-    """Whether `model` is a checkpoint's model config `held` with a learned code refinement added: the checkpoint
-    has none (refiner_iters 0), `model` has one, and every other field of `same_weights_config` is equal. Its
-    encoder and decoders then load from the checkpoint and the refiner starts fresh (an untrained refiner leaves
-    the codes as they are)."""
+    """Whether `model` is a checkpoint's model config `held` with learned code refinement passes added: the
+    checkpoint has fewer passes (refiner_iters, possibly 0), the passes it has are of `model`'s width and depth, and
+    every other field of `same_weights_config` is equal. Its weights then load from the checkpoint and the added
+    passes start fresh (an untrained pass leaves the codes as they are)."""
     if not getattr(model, "refiner_iters", 0):
         return False
     try:
         held_cfg = type(model).from_dict(held)
     except (TypeError, ValueError):
         return False
-    if held_cfg.refiner_iters:
+    if held_cfg.refiner_iters >= model.refiner_iters:
         return False
-    keep = {f: getattr(model, f) for f in REFINER_FIELDS}
+    keep = {f: getattr(model, f) for f in REFINER_FIELDS} if held_cfg.refiner_iters == 0 else {
+        "refiner_iters": model.refiner_iters}
     return dataclasses.replace(held_cfg, encoder_draws=model.encoder_draws, **keep) == model
 
 

@@ -268,8 +268,8 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
         if not (same_weights_config(cfg_dict, cfg.model) or fresh_refiner):
             raise ValueError(f"{init} holds model config {cfg_dict}, not the training config's {cfg.model.to_dict()}; "
                              f"pass a --config whose 'model' is the checkpoint's (its JSON's meta.training.train_config, "
-                             f"which a plain --init uses), or it with refiner_iters >= 1 added.")
-        if fresh_refiner:   # the checkpoint's encoder and decoders, a new (identity) refiner
+                             f"which a plain --init uses), or it with more refiner_iters.")
+        if fresh_refiner:   # the checkpoint's weights; the passes it lacks start as the identity
             state = {**{f"refiner.{k}": v for k, v in volume.net.refiner.state_dict().items()}, **state}
         volume.net.load_state_dict(state)
         start = int(meta.get("training", {}).get("step", 0))

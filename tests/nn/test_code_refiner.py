@@ -164,6 +164,14 @@ def test_training_only_the_refiner_leaves_the_encoder_and_decoders(tmp_path):
         assert torch.equal(after[k], v), k
     head = [k for k in after if k.startswith("refiner.head.0.4.")]
     assert head and any(after[k].abs().max() > 0 for k in head)    # the zero-initialised last layer trained
+    # a second pass added to that checkpoint: the first pass loads, the second starts as the identity
+    two = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, refiner_iters=2))
+    r = train(two, tmp_path / "r2", init=tmp_path / "r" / "ckpt-00000005" / "model", max_steps=1, quiet=True)
+    assert r["step"] == 6
+    grown, _, _ = load_checkpoint(tmp_path / "r2" / "ckpt-00000006" / "model")
+    assert any(k.startswith("refiner.head.1.") for k in grown)
+    for k, v in before.items():
+        assert torch.equal(grown[k], v), k
 
 
 def test_refiner_options_fail_in_one_line():
@@ -179,4 +187,7 @@ def test_refiner_options_fail_in_one_line():
     assert adds_refiner(held, VolumeConfig(refiner_iters=2))
     assert not adds_refiner(held, VolumeConfig())                                   # nothing added
     assert not adds_refiner(held, VolumeConfig(refiner_iters=2, latent_dim=64))     # other weights
-    assert not adds_refiner(VolumeConfig(refiner_iters=1).to_dict(), VolumeConfig(refiner_iters=2))
+    one = VolumeConfig(refiner_iters=1).to_dict()
+    assert adds_refiner(one, VolumeConfig(refiner_iters=2))                          # a second pass
+    assert not adds_refiner(one, VolumeConfig(refiner_iters=1))
+    assert not adds_refiner(one, VolumeConfig(refiner_iters=2, refiner_hidden=32))  # the first pass's width changed
