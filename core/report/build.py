@@ -59,6 +59,9 @@ class Section:
 
 
 _CKPTS = ("core/assets/volsmpl_anny.safetensors", "core/assets/coap_anny.safetensors")
+#: the committed model with learned code refinement (docs/learned_refinement.md) and the model it refines
+_REFINER = "checkpoints/volsmpl_r2/ckpt-00054500/model"
+_BASE = "checkpoints/volsmpl_b8q/ckpt-00050000/model"
 #: the default body's data: every result poses it
 _BODY_DATA = ("core/assets/anny_body.json", "core/assets/anny_shapes.npz", "core/assets/anny_smpl_neutral.npz",
               "core/assets/anny_smplx_neutral.npz")
@@ -79,11 +82,14 @@ def _app(name: str, tables: tuple, title: str, build: Callable = rs.summary_sect
 SECTIONS: dict[str, Section] = {
     "eval": Section(
         "Volumetric bodies: accuracy", ("1",),
-        ("core/evaluation",),
-        {"eval_volsmpl": "docs/eval_volsmpl_anny.json", "eval_coap": "docs/eval_coap_anny.json"},
+        ("core/evaluation", "docs/scripts/refiner_cost.py"),
+        {"eval_volsmpl": "docs/eval_volsmpl_anny.json", "eval_coap": "docs/eval_coap_anny.json",
+         "eval_refiner": "docs/eval_volsmpl_refiner.json", "refiner_cost": "docs/refiner_cost.json"},
         {"eval_volsmpl": "volsmpl eval --out docs/eval_volsmpl_anny.json",
-         "eval_coap": "volsmpl eval --checkpoint core/assets/coap_anny --out docs/eval_coap_anny.json"},
-        rs.eval_section, ("docs/surfaces.png", "docs/sdf_slice.png"), _CKPTS),
+         "eval_coap": "volsmpl eval --checkpoint core/assets/coap_anny --out docs/eval_coap_anny.json",
+         "eval_refiner": f"volsmpl eval --checkpoint {_REFINER} --out docs/eval_volsmpl_refiner.json",
+         "refiner_cost": f"python docs/scripts/refiner_cost.py --checkpoint {_BASE} {_REFINER} --out docs/refiner_cost.json"},
+        rs.eval_section, ("docs/surfaces.png", "docs/sdf_slice.png"), _CKPTS + (_REFINER + ".safetensors",)),
     "bench": Section(
         "Volumetric bodies: time and memory; winding numbers", ("1", "C.4"),
         ("core/bench", "core/runtime/meter.py"),

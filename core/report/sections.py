@@ -174,6 +174,24 @@ def eval_section(ctx) -> list[str]:
         rows.append([f"paper: {t['row_labels'][backend]}"] + [fmt_paper(t["rows"][backend][k]) for k, _ in cols]
                     + ["-"])
     rows.append([f"paper: {t['row_labels']['leap']}"] + [fmt_paper(t["rows"]["leap"][k]) for k, _ in cols] + ["-"])
+    d = ctx["results"].get("eval_refiner")
+    if d is not None:   # a checkpoint beyond the paper: its encoder's codes corrected by learned passes
+        m = d.get("metrics") or {}
+        ck = get_path(d, "extra.checkpoint")
+        rows.insert(1, [f"ours: VolumetricSMPL + learned code refinement ({ck})"]
+                    + [fmt(None if m.get(k) is None else m[k] * s) for k, s in cols] + [fmt(m.get("mse_sdf_surf"))])
+        lines.append(f"- VolumetricSMPL + learned code refinement (docs/learned_refinement.md): the checkpoint {ck}, not "
+                     f"shipped; same bodies, points and ground truth as the shipped model's row.")
+    cost = ctx["results"].get("refiner_cost")
+    if cost is not None:
+        by = {}
+        for r in cost.get("rows") or []:
+            by.setdefault(r.get("B"), []).append(r)
+        for B, rs_ in sorted(by.items(), key=lambda kv: str(kv[0])):
+            parts = [f"{r.get('checkpoint')} ({fmt(r.get('refiner_iters'))} passes): encode {fmt(r.get('encode_ms'))} ms, "
+                     f"step {fmt(r.get('step_ms'))} ms" for r in rs_]
+            lines.append(f"- Cost at B = {B} ({fmt(cost.get('threads'))} thread, {fmt(cost.get('points'))} points per body; "
+                         f"`docs/scripts/refiner_cost.py`): " + "; ".join(parts) + ".")
     lines.append("- The paper does not publish the sampling behind its Table 1, and the surface IoU depends strongly on "
                  "the offsets' scale: `volsmpl eval --sampling parts --surface-sigma S` and the README's \"Sampling "
                  "protocols\" (docs/eval_protocols.json) give both samplings at 1-3 cm.")
