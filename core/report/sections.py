@@ -188,7 +188,8 @@ def eval_section(ctx) -> list[str]:
         for r in cost.get("rows") or []:
             by.setdefault(r.get("B"), []).append(r)
         for B, rs_ in sorted(by.items(), key=lambda kv: str(kv[0])):
-            parts = [f"{r.get('checkpoint')} ({fmt(r.get('refiner_iters'))} passes): encode {fmt(r.get('encode_ms'))} ms, "
+            parts = [f"{r.get('checkpoint')} ({fmt(r.get('refiner_iters'))} pass{'' if r.get('refiner_iters') == 1 else 'es'}): "
+                     f"encode {fmt(r.get('encode_ms'))} ms, "
                      f"step {fmt(r.get('step_ms'))} ms" for r in rs_]
             lines.append(f"- Cost at B = {B} ({fmt(cost.get('threads'))} thread, {fmt(cost.get('points'))} points per body; "
                          f"`docs/scripts/refiner_cost.py`): " + "; ".join(parts) + ".")

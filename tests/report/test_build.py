@@ -338,11 +338,13 @@ def test_the_learned_refinement_row_and_its_cost(tmp_path):
                                                             "extra": {"checkpoint": "runs/r/model"}})
     write(tmp_path / "docs" / "refiner_cost.json", {"threads": 1, "points": 2000, "rows": [
         {"checkpoint": "base", "B": 1, "refiner_iters": 0, "encode_ms": 40.0, "step_ms": 100.0},
-        {"checkpoint": "runs/r/model", "B": 1, "refiner_iters": 2, "encode_ms": 80.0, "step_ms": 125.0}]})
+        {"checkpoint": "runs/r/model", "B": 1, "refiner_iters": 2, "encode_ms": 80.0, "step_ms": 125.0},
+        {"checkpoint": "runs/q/model", "B": 1, "refiner_iters": 1, "encode_ms": 60.0, "step_ms": 110.0}]})
     text, _ = report.build_report(tmp_path / "docs" / "report.md", root=tmp_path, git=NoGit())
     ev = text[text.index("## Volumetric bodies: accuracy"):text.index("## Volumetric bodies: time")]
     rows = [ln for ln in ev.splitlines() if ln.startswith("| ours:")]
     assert rows[0].startswith("| ours: VolumetricSMPL | 90.00 | 85.00 | 95.00 |")
     assert rows[1].startswith("| ours: VolumetricSMPL + learned code refinement (runs/r/model) | 92.50 | 89.00 | 96.00 |")
     assert ("- Cost at B = 1 (1 thread, 2,000 points per body; `docs/scripts/refiner_cost.py`): base (0 passes): encode "
-            "40.00 ms, step 100.0 ms; runs/r/model (2 passes): encode 80.00 ms, step 125.0 ms.") in ev
+            "40.00 ms, step 100.0 ms; runs/r/model (2 passes): encode 80.00 ms, step 125.0 ms; runs/q/model (1 pass): "
+            "encode 60.00 ms, step 110.0 ms.") in ev
