@@ -134,7 +134,7 @@ def main():
                 with torch.enable_grad():
                     z = warm(net, z0, xin, target, sc, i)
             other = torch.cdist(prev.transpose(0, 1), prev.transpose(0, 1))           # (K, B, B)
-            other = other + torch.eye(len(prev)) * float("inf")                    # another body than itself
+            other = other.masked_fill(torch.eye(len(prev), dtype=torch.bool), float("inf"))   # another body
             drift.append(other.min(dim=-1).values.T / prev.norm(dim=-1))           # (B, K), appended last
             return vol.query_encoded(dataclasses.replace(enc, code=net.code_from_z(z, None)), pts)
 
