@@ -60,8 +60,9 @@ class Section:
 
 _CKPTS = ("core/assets/volsmpl_anny.safetensors", "core/assets/coap_anny.safetensors")
 #: the committed model with learned code refinement (docs/learned_refinement.md) and the model it refines
-_REFINER = "checkpoints/volsmpl_r2/ckpt-00054500/model"
+_REFINER = "checkpoints/volsmpl_r3/ckpt-00057000/model"
 _BASE = "checkpoints/volsmpl_b8q/ckpt-00050000/model"
+_R1 = "checkpoints/volsmpl_r1/ckpt-00053000/model"
 #: the default body's data: every result poses it
 _BODY_DATA = ("core/assets/anny_body.json", "core/assets/anny_shapes.npz", "core/assets/anny_smpl_neutral.npz",
               "core/assets/anny_smplx_neutral.npz")
@@ -88,7 +89,8 @@ SECTIONS: dict[str, Section] = {
         {"eval_volsmpl": "volsmpl eval --out docs/eval_volsmpl_anny.json",
          "eval_coap": "volsmpl eval --checkpoint core/assets/coap_anny --out docs/eval_coap_anny.json",
          "eval_refiner": f"volsmpl eval --checkpoint {_REFINER} --out docs/eval_volsmpl_refiner.json",
-         "refiner_cost": f"python docs/scripts/refiner_cost.py --checkpoint {_BASE} {_REFINER} --out docs/refiner_cost.json"},
+         "refiner_cost": f"python docs/scripts/refiner_cost.py --checkpoint {_BASE} {_R1} {_REFINER} "
+                         f"--refine-steps 0 1 --out docs/refiner_cost.json"},
         rs.eval_section, ("docs/surfaces.png", "docs/sdf_slice.png"), _CKPTS + (_REFINER + ".safetensors",)),
     "bench": Section(
         "Volumetric bodies: time and memory; winding numbers", ("1", "C.4"),

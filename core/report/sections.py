@@ -151,6 +151,11 @@ def flagged_note(data: dict) -> list[str]:
                 + ", ".join(parts) + " (`flagged` in the result)."]
 
 
+def _refine_steps(steps) -> str:
+    """The cost line's words for R steps of test-time code refinement per encoding ('' for none or not recorded)."""
+    return f", {fmt(steps)} refinement step{'' if steps == 1 else 's'} per encoding" if steps else ""
+
+
 # ---------------------------------------------------------------------------------------------------------- builders
 
 def eval_section(ctx) -> list[str]:
@@ -188,8 +193,8 @@ def eval_section(ctx) -> list[str]:
         for r in cost.get("rows") or []:
             by.setdefault(r.get("B"), []).append(r)
         for B, rs_ in sorted(by.items(), key=lambda kv: str(kv[0])):
-            parts = [f"{r.get('checkpoint')} ({fmt(r.get('refiner_iters'))} pass{'' if r.get('refiner_iters') == 1 else 'es'}): "
-                     f"encode {fmt(r.get('encode_ms'))} ms, "
+            parts = [f"{r.get('checkpoint')} ({fmt(r.get('refiner_iters'))} pass{'' if r.get('refiner_iters') == 1 else 'es'}"
+                     f"{_refine_steps(r.get('refine_steps'))}): encode {fmt(r.get('encode_ms'))} ms, "
                      f"step {fmt(r.get('step_ms'))} ms" for r in rs_]
             lines.append(f"- Cost at B = {B} ({fmt(cost.get('threads'))} thread, {fmt(cost.get('points'))} points per body; "
                          f"`docs/scripts/refiner_cost.py`): " + "; ".join(parts) + ".")

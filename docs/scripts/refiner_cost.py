@@ -1,13 +1,16 @@
 """What the learned code refinement costs (docs/learned_refinement.md): the volume's share of an optimisation step.
 
     python docs/scripts/refiner_cost.py --checkpoint A [B ...] [--batch 1 8] [--points 2000] [--repeats 9] [--threads 1]
+        [--refine-steps 0 1]
 
 For each checkpoint and batch size B, the median wall time (ms) of `repeats` runs, after 2 untimed ones, of:
 - encode: a fresh encoding of B validation bodies under torch.no_grad() (`Volume.encode(out, fresh=True)`);
 - step: what an app's optimisation step asks of the volume: pose B bodies from body poses that require gradients
   (LBS), encode them, query `points` points per body near its surface (`validation.query_points`, half uniform in the
   body's box), sum the ReLU of the negated distances (a collision term) and back-propagate to the poses.
-A body output is new at every run, as in an optimisation. Run it on a quiet machine: times compare within one run.
+A body output is new at every run, as in an optimisation. `--refine-steps R ...` times each also with R steps of
+test-time code refinement per encoding (`Volume.set_code_refinement`): R = 1 costs what one warm-started refinement
+step per optimisation step costs (docs/code_refinement.md). Run it on a quiet machine: times compare within one run.
 """
 import argparse
 import json
@@ -15,7 +18,6 @@ import statistics
 import time
 
 import torch
-
 from volsmpl.body.model import create_body
 from volsmpl.evaluation.validation_set import query_points, validation_bodies
 from volsmpl.volume.attach import attach_volume
@@ -39,6 +41,7 @@ def main():
     p.add_argument("--points", type=int, default=2000)
     p.add_argument("--repeats", type=int, default=9)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--refine-steps", type=int, nargs="+", default=[0])
     p.add_argument("--out", default=None)
     args = p.parse_args()
     torch.set_num_threads(args.threads)
@@ -46,7 +49,8 @@ def main():
     for ck in args.checkpoint:
         body = create_body()
         vol = attach_volume(body, checkpoint=ck)
-        for B in args.batch:
+        for B, R in [(B, R) for B in args.batch for R in args.refine_steps]:
+            vol.set_code_refinement(R)
             params = {k: v[:B] for k, v in validation_bodies(B).items()}
             with torch.no_grad():
                 out = body(**params)
@@ -61,7 +65,7 @@ def main():
                 o = body(**{**params, "body_pose": pose})
                 torch.relu(-vol.query(o, pts)).sum().backward()
 
-            rows.append({"checkpoint": ck, "B": B, "refiner_iters": vol.net.config.refiner_iters,
+            rows.append({"checkpoint": ck, "B": B, "refiner_iters": vol.net.config.refiner_iters, "refine_steps": R,
                          "encode_ms": round(median_ms(encode, args.repeats), 1),
                          "step_ms": round(median_ms(step, args.repeats), 1)})
             print(json.dumps(rows[-1]), flush=True)

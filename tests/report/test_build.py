@@ -331,7 +331,8 @@ def test_egohmr_paired_difference_and_activities_from_the_apps_own_rows(tmp_path
 
 def test_the_learned_refinement_row_and_its_cost(tmp_path):
     """The eval section's row of the checkpoint with learned code refinement (a synthetic eval JSON) sits beside the
-    shipped model's, and the cost lines list each checkpoint's encode and step times per batch size."""
+    shipped model's, and the cost lines list each checkpoint's encode and step times per batch size, with the
+    test-time refinement steps where a row has them."""
     write(tmp_path / "docs" / "eval_volsmpl_anny.json", {"metrics": {"iou_mean": 0.9, "iou_surf": 0.85, "iou_unif": 0.95}})
     write(tmp_path / "docs" / "eval_volsmpl_refiner.json", {"metrics": {"iou_mean": 0.925, "iou_surf": 0.89,
                                                                         "iou_unif": 0.96},
@@ -339,7 +340,8 @@ def test_the_learned_refinement_row_and_its_cost(tmp_path):
     write(tmp_path / "docs" / "refiner_cost.json", {"threads": 1, "points": 2000, "rows": [
         {"checkpoint": "base", "B": 1, "refiner_iters": 0, "encode_ms": 40.0, "step_ms": 100.0},
         {"checkpoint": "runs/r/model", "B": 1, "refiner_iters": 2, "encode_ms": 80.0, "step_ms": 125.0},
-        {"checkpoint": "runs/q/model", "B": 1, "refiner_iters": 1, "encode_ms": 60.0, "step_ms": 110.0}]})
+        {"checkpoint": "runs/q/model", "B": 1, "refiner_iters": 1, "encode_ms": 60.0, "step_ms": 110.0},
+        {"checkpoint": "base", "B": 1, "refiner_iters": 0, "refine_steps": 1, "encode_ms": 70.0, "step_ms": 130.0}]})
     text, _ = report.build_report(tmp_path / "docs" / "report.md", root=tmp_path, git=NoGit())
     ev = text[text.index("## Volumetric bodies: accuracy"):text.index("## Volumetric bodies: time")]
     rows = [ln for ln in ev.splitlines() if ln.startswith("| ours:")]
@@ -347,4 +349,5 @@ def test_the_learned_refinement_row_and_its_cost(tmp_path):
     assert rows[1].startswith("| ours: VolumetricSMPL + learned code refinement (runs/r/model) | 92.50 | 89.00 | 96.00 |")
     assert ("- Cost at B = 1 (1 thread, 2,000 points per body; `docs/scripts/refiner_cost.py`): base (0 passes): encode "
             "40.00 ms, step 100.0 ms; runs/r/model (2 passes): encode 80.00 ms, step 125.0 ms; runs/q/model (1 pass): "
-            "encode 60.00 ms, step 110.0 ms.") in ev
+            "encode 60.00 ms, step 110.0 ms; base (0 passes, 1 refinement step per encoding): encode 70.00 ms, step "
+            "130.0 ms.") in ev
