@@ -118,7 +118,7 @@ def main():
         warm = WarmCodes(steps, a.lr, a.schedule, a.iters, a.carry)
         t0 = time.perf_counter()
 
-        drift = []
+        drift = {"per_step": [], "between": None}
 
         def warm_predict(out_end, pts, warm=warm, drift=drift):
             z = prev = None
@@ -129,24 +129,23 @@ def main():
                     out = body(**{**bodies, "body_pose": pose})
                 enc, z0, xin, target, sc = encoder_codes(vol, out)
                 if prev is not None:
-                    drift.append(((z0 - prev).norm(dim=-1) / prev.norm(dim=-1)).flatten())
+                    drift["per_step"].append(((z0 - prev).norm(dim=-1) / prev.norm(dim=-1)).flatten())
                 prev = z0
                 with torch.enable_grad():
                     z = warm(net, z0, xin, target, sc, i)
             other = torch.cdist(prev.transpose(0, 1), prev.transpose(0, 1))           # (K, B, B)
             other = other.masked_fill(torch.eye(len(prev), dtype=torch.bool), float("inf"))   # another body
-            drift.append(other.min(dim=-1).values.T / prev.norm(dim=-1))           # (B, K), appended last
+            drift["between"] = (other.min(dim=-1).values.T / prev.norm(dim=-1)).flatten()   # (B * K,)
             return vol.query_encoded(dataclasses.replace(enc, code=net.code_from_z(z, None)), pts)
 
         with torch.no_grad():
             res = evaluate(warm_predict, bodies=bodies, body=body, config=cfg, name=f"warm{steps}")
-        step_drift, between = torch.cat(drift[:-1]), drift[-1].flatten()
         rows.append({"codes": f"warm, {steps} step(s) per iteration", "steps": steps,
                      "seconds": round(time.perf_counter() - t0, 1), "iou": iou_row(res),
                      # |z_t - z_(t-1)| / |z_(t-1)| of the encoder's codes from one step to the next, over all
                      # (step, body, part); and at the end, each (body, part)'s nearest other body's code likewise
-                     "code_change_per_step": quantiles(step_drift),
-                     "code_distance_to_other_bodies": quantiles(between)})
+                     "code_change_per_step": quantiles(torch.cat(drift["per_step"])),
+                     "code_distance_to_other_bodies": quantiles(drift["between"])})
         print(json.dumps(rows[-1]), flush=True)
     if a.out:
         with open(a.out, "w") as fh:
