@@ -25,6 +25,8 @@ The options:
   --save-meshes              write the fitted bodies (and objects) of every case as mesh files under OUT/meshes/
                              (a user's own case writes them always; a table run only with this flag)
   --quiet                    no progress bars (they show only on a terminal anyway: none in a log file)
+  --refine-steps R           refine the learned kinds' part codes by R optimiser steps at every encoding (0: none)
+  --refine-warm              with R >= 1: carry each body's refinement from one iteration of the fit to the next
 
 The envelope: {app, config, summary, paper, cases: {kind: [records]}, figures, meta, flagged, warnings} and, after them, what an app
 adds of its own (motion's tuning and paired differences, egohmr's regressor row and batch sizes).
@@ -36,7 +38,8 @@ import os
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["add_common", "check_common", "check_threads", "parse_kinds", "checkpoints", "volumes",
+__all__ = ["add_common", "check_common", "check_threads", "check_refinement", "code_refinement", "parse_kinds",
+           "checkpoints", "volumes",
            "checkpoint_names", "CaseRecords", "envelope", "flag_cases", "print_flagged", "case_records",
            "write_results"]
 
@@ -66,6 +69,12 @@ def add_common(p, *, out: str | None, model: str = "volsmpl,coap,mesh", none: bo
                         "input's units and axes (a user's own case writes them always)")
     p.add_argument("--quiet", action="store_true",
                    help="no progress bars (shown only on a terminal: never in a log file)")
+    p.add_argument("--refine-steps", type=int, default=0,
+                   help="refine the learned kinds' part codes by this many optimiser steps on the posed mesh's own "
+                        "surface at every encoding (volsmpl.volume.code_refinement; default 0: the encoder's codes)")
+    p.add_argument("--refine-warm", action="store_true",
+                   help="with --refine-steps R: each encoding continues the same bodies' refinement from the "
+                        "previous iteration of the fit (volsmpl.volume.warm_codes), R steps per iteration")
 
 
 def parse_kinds(text: str, none: bool = False) -> list[str]:
@@ -117,6 +126,7 @@ def check_common(args, none: bool = False) -> tuple[list[str], dict]:
 
     models = parse_kinds(args.model, none)
     ckpts = checkpoints(args, models)
+    check_refinement(args, models)
     check_threads(args.threads)
     if args.render < 0:
         raise ValueError(f"--render {args.render}: give the number of cases to draw (0: none)")
@@ -124,10 +134,30 @@ def check_common(args, none: bool = False) -> tuple[list[str], dict]:
     return models, ckpts
 
 
+def check_refinement(args, models: list[str]) -> None:
+    """`--refine-steps R` (an integer >= 0) and `--refine-warm` (needs R >= 1) for a run with a learned kind."""
+    from volsmpl.volume.models import model_kind
+
+    steps, warm = getattr(args, "refine_steps", 0), getattr(args, "refine_warm", False)
+    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
+        raise ValueError(f"--refine-steps {steps}: give an integer >= 0 (0: the encoder's codes)")
+    if warm and steps == 0:
+        raise ValueError("--refine-warm carries the code refinement across iterations: give --refine-steps 1 (or more)")
+    if steps and not any(m != "none" and model_kind(m).learned for m in models):
+        raise ValueError(f"--refine-steps refines the part codes of volsmpl and coap; --model {','.join(models)} has "
+                         f"none: add one of them or drop the option")
+
+
+def code_refinement(args) -> dict:
+    """What results.json records of the code refinement: {'steps': R, 'warm': bool}."""
+    return {"steps": int(getattr(args, "refine_steps", 0)), "warm": bool(getattr(args, "refine_warm", False))}
+
+
 def volumes(body, models: list[str], ckpts: dict, device: str = "cpu", random_init: bool = False,
-            encoder_bf16: bool = False) -> dict:
+            encoder_bf16: bool = False, refine: dict | None = None) -> dict:
     """One volume per kind, attached to `body` on `device` (kind 'none': None). random_init: untrained networks;
-    encoder_bf16: the learned kinds' part encoder under bfloat16 autocast."""
+    encoder_bf16: the learned kinds' part encoder under bfloat16 autocast; refine: `code_refinement(args)`, set on
+    the learned kinds (`Volume.set_code_refinement`)."""
     import volsmpl
     from volsmpl.volume.models import model_kind
 
@@ -143,6 +173,8 @@ def volumes(body, models: list[str], ckpts: dict, device: str = "cpu", random_in
             vol = volsmpl.attach_volume(body, ckpts.get(m), model=m)
         if learned:
             vol.net.encoder_bf16 = encoder_bf16
+            if refine:
+                vol.set_code_refinement(refine["steps"], warm=refine["warm"])
         out[m] = vol.to(device)
     return out
 
@@ -178,6 +210,9 @@ class CaseRecords:
 
         from volsmpl.io.case_store import job_key
 
+        refine = getattr(volume, "refine_steps", 0)
+        if refine:   # the codes depend on it; keys of runs without it stay as they were
+            spec = {**spec, "code_refinement": [refine, bool(volume.refine_warm)]}
         return job_key({**spec, "threads": torch.get_num_threads()}, modules=[] if volume is None else [volume],
                        packages=["volsmpl.apps"])
 

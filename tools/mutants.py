@@ -23,6 +23,20 @@ T = "tests/"
 
 #: name -> (file in the repository, text, its replacement, tests that must catch it)
 MUTANTS = {
+    # volume: code refinement carried along an optimisation
+    "warm_moments_dropped": ("core/volume/warm_codes.py", 's["delta"][rows, kk], s["m1"][rows, kk], s["m2"][rows, kk] = var - zd, m1, m2',
+                             's["delta"][rows, kk], s["m1"][rows, kk], s["m2"][rows, kk] = var - zd, m1 * 0, m2 * 0',
+                             [T + "volume/test_warm_codes.py::test_encodings_of_a_body_that_stays_continue_one_adam_run"]),
+    "warm_keys_ignored": ("core/volume/warm_codes.py", "ids = torch.arange(B) if self._ids is None else self._ids",
+                          "ids = torch.arange(B)",
+                          [T + "volume/test_warm_codes.py::test_keys_follow_the_bodies_not_their_order"]),
+    "warm_never_restarts": ("core/volume/warm_codes.py", "restart = had & (change > self.max_change)",
+                            'restart = had & (change > float("inf"))',
+                            [T + "volume/test_warm_codes.py::test_a_body_that_jumped_starts_afresh"]),
+    "harness_opens_no_warm_scope": ("core/optim/harness.py", 'if hasattr(m, "warm_start"):', "if False:",
+                                    [T + "volume/test_warm_codes.py::test_the_harness_opens_one_scope_per_run"]),
+    "motion_warm_keys_by_group_position": ("apps/motion/objective.py", "ids[idx.cpu()]", "idx.cpu()",
+                                           [T + "apps/motion/test_app.py::test_warm_code_refinement_keys_the_frames_by_their_rows"]),
     # body: partition and part boxes, kinematic chain, contact regions
     "boxes_padded_one_side": ("core/body/partition.py", "return center - half, center + half",
                               "return lo - 2 * (half - 0.5 * (hi - lo)), hi",

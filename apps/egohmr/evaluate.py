@@ -9,6 +9,7 @@ tests, so rows differ only by the guidance.
 """
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
 
@@ -105,8 +106,10 @@ def draw(net, body, d: dict, volume=None, opts: GuideOptions | None = None, seed
         guide = Guidance(score.gradient, opts.scale, opts.steps, opts.plain_steps, opts.plain_factor,
                          pelvis=score.moves_pelvis)
     bar = lambda steps: progress(steps, desc, quiet=quiet, total=sched.T, unit="step")  # noqa: E731
-    x = sample(lambda xt, t: net.denoise(xt, t, cond), (len(cond), POSE_DIM), sched, gen, guide, device=cond.device,
-               bar=bar)
+    warm = volume.warm_start() if guide is not None and hasattr(volume, "warm_start") else contextlib.nullcontext()
+    with warm:   # a volume set to warm code refinement carries the frames' codes through the denoising steps
+        x = sample(lambda xt, t: net.denoise(xt, t, cond), (len(cond), POSE_DIM), sched, gen, guide,
+                   device=cond.device, bar=bar)
     pelvis = d["pelvis_hat"] if score is None else score.placed()
     return x, pelvis, score
 

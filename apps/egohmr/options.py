@@ -23,7 +23,7 @@ SUPPORT_DEFAULT = "on"
 
 #: the options that shape the guided sampler (read only where --model has a guide other than 'none')
 GUIDANCE = {"guide_steps", "plain_steps", "plain_factor", "wrt", "joints", "reduce", "encoder_bf16", "pelvis_step",
-            "support", "pelvis_along"}
+            "support", "pelvis_along", "refine_steps", "refine_warm"}
 #: the largest --pelvis-step (metres per guided step): the regressed pelvis is off by 12 cm on average (val split)
 MAX_PELVIS_STEP = 0.1
 SUPPORT = ("on", "off")

@@ -61,19 +61,21 @@ def guide_volumes(args, guides: list[str], ckpts: dict, device) -> dict:
     """guide -> its volume (None for 'none'), on a body of their own (volsmpl.apps.table.volumes); ckpts: the
     checkpoints `check_common` checked."""
     import volsmpl
-    from volsmpl.apps.table import volumes
+    from volsmpl.apps.table import code_refinement, volumes
 
-    return volumes(volsmpl.create_body(), guides, ckpts, device, encoder_bf16=args.encoder_bf16)
+    return volumes(volsmpl.create_body(), guides, ckpts, device, encoder_bf16=args.encoder_bf16,
+                   refine=code_refinement(args))
 
 
 def run_config(args, guides: list[str], ckpts: dict, scales: dict, frames: int, split: str) -> dict:
     """What a sample or tune result records of its settings (results.json's config)."""
-    from volsmpl.apps.table import checkpoint_names
+    from volsmpl.apps.table import checkpoint_names, code_refinement
 
     return {"split": split, "frames": frames, "seed": args.seed, "models": guides, "scales": scales,
             "encoder_bf16": args.encoder_bf16, "batch": args.batch, "budget_mb": args.budget_mb,
             "network": args.checkpoint or "apps/egohmr/egohmr_anny",
-            "checkpoints": checkpoint_names(guides, ckpts), "threads": torch.get_num_threads()}
+            "checkpoints": checkpoint_names(guides, ckpts), "code_refinement": code_refinement(args),
+            "threads": torch.get_num_threads()}
 
 
 def run_sample(args, ckpts: dict) -> int:

@@ -30,8 +30,8 @@ import numpy as np
 import torch
 
 from volsmpl.apps.checks import applies, claim_out, number, safe_name, warn
-from volsmpl.apps.table import (CaseRecords, add_common, check_common, check_threads, checkpoint_names, envelope,
-                                flag_cases, print_flagged, volumes, write_results)
+from volsmpl.apps.table import (CaseRecords, add_common, check_common, check_threads, checkpoint_names,
+                                code_refinement, envelope, flag_cases, print_flagged, volumes, write_results)
 
 from .console import case_line, format_table
 from .plausibility import GOOD
@@ -170,10 +170,11 @@ def _cases(args, split: str, database) -> list:
 
 #: the options each action reads (volsmpl.apps.checks.applies refuses the others)
 _COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device"}
+_REFINE = {"refine_steps", "refine_warm"}
 _FIT = {"preset", "iters", "lr", "w_keypoints", "w_silhouette", "contact_fraction", "contact_huber", "contact_margin"}
 USES = {"make-db": {"n", "seed", "db", "threads"},
-        "run": _COMMON | _FIT | {"resume", "render", "cases", "split", "db", "seed", "batch", "save_meshes"},
-        "fit": _COMMON | _FIT | {"resume", "render", "case", "save_meshes"},  # fit writes its meshes always
+        "run": _COMMON | _FIT | _REFINE | {"resume", "render", "cases", "split", "db", "seed", "batch", "save_meshes"},
+        "fit": _COMMON | _FIT | _REFINE | {"resume", "render", "case", "save_meshes"},  # fit writes its meshes always
         "tune": _COMMON | {"preset", "iters", "lr", "contact_fraction", "contact_huber", "contact_margin", "cases",
                            "split", "db", "seed", "grid", "batch"},
         "make-case": {"object", "units", "category", "size_m", "body", "keypoints", "image_size", "focal",
@@ -298,8 +299,9 @@ def _run(args, models: list, ckpts: dict) -> int:
     body = volsmpl.create_body().to(args.device)
     warnings = []
     check_data(cases, body, args.device, warnings)
-    vols = volumes(body, models, ckpts, args.device)
-    config = {**asdict(cfg), "preset": args.preset, "models": models, "checkpoints": checkpoint_names(models, ckpts), "split": split,
+    vols = volumes(body, models, ckpts, args.device, refine=code_refinement(args))
+    config = {**asdict(cfg), "preset": args.preset, "models": models, "checkpoints": checkpoint_names(models, ckpts),
+              "code_refinement": code_refinement(args), "split": split,
               "seed": args.seed, "batch": args.batch, "cases_requested": len(cases),
               "threads": torch.get_num_threads()}
     store = CaseRecords(out, "hoi", resume=args.resume)

@@ -213,8 +213,8 @@ def run(args) -> int:
 def _run(args, opt: dict) -> int:
     """`volsmpl motion` on a claimed --out, its options checked."""
     import volsmpl
-    from volsmpl.apps.table import (CaseRecords, checkpoint_names, envelope, flag_cases, print_flagged, volumes,
-                                    write_results)
+    from volsmpl.apps.table import (CaseRecords, checkpoint_names, code_refinement, envelope, flag_cases,
+                                    print_flagged, volumes, write_results)
     from volsmpl.io.provenance import machine_info
     from volsmpl.report import paper
 
@@ -232,7 +232,8 @@ def _run(args, opt: dict) -> int:
     scenes = _scenes(args, frames, warnings)   # a user's scene checked here, before the networks load
     body = volsmpl.create_body().to(args.device)
     model = W.WalkModel(body)
-    vols = volumes(body, models, ckpts, args.device, encoder_bf16=args.encoder_bf16)  # bf16: in every key
+    vols = volumes(body, models, ckpts, args.device, encoder_bf16=args.encoder_bf16,  # bf16: in every key
+                   refine=code_refinement(args))
     costs, coll_frames = _costs(args, body, model, vols, scenes, opt)
     records = {(m, w): [] for m in models for w in weights[m]}
     cases, figures = {}, {}
@@ -248,7 +249,8 @@ def _run(args, opt: dict) -> int:
               "coll_frames": coll_frames, "mem_budget_gb": args.mem_budget_gb, "residuals": args.residuals,
               "floor_in_loss": args.floor_in_loss, "user_scene": args.scene, "device": args.device,
               "checkpoints": checkpoint_names(models, ckpts), "batch": args.batch, "protocol": protocol,
-              "encoder_bf16": args.encoder_bf16, "seed": args.seed, "threads": torch.get_num_threads(),
+              "encoder_bf16": args.encoder_bf16, "code_refinement": code_refinement(args),
+              "seed": args.seed, "threads": torch.get_num_threads(),
               "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
                            "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"}
     units, up = (args.units, args.up) if args.scene is not None else ("m", "y")

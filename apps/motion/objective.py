@@ -17,6 +17,7 @@
 """
 from __future__ import annotations
 
+import contextlib
 from types import SimpleNamespace
 
 import numpy as np
@@ -116,8 +117,10 @@ class SceneCollision:
             need[r] = ins.any(1)
         return kept, need
 
-    def per_frame(self, out) -> torch.Tensor:
-        """Summed penetration per body of a body output (R bodies) -> (R,), through the grouped, culled calls."""
+    def per_frame(self, out, ids: torch.Tensor | None = None) -> torch.Tensor:
+        """Summed penetration per body of a body output (R bodies) -> (R,), through the grouped, culled calls.
+        ids: (R,) the bodies' lasting identities (frame rows), which key a volume's warm code refinement
+        (`Volume.warm_keys`); None: 0..R-1."""
         kept, need = self._select(out)
         R = len(kept)
         loss = out.vertices.new_zeros(R)
@@ -136,7 +139,10 @@ class SceneCollision:
                 n_points += k
             idx = torch.as_tensor(rows, device=loss.device)
             sub = SimpleNamespace(vertices=out.vertices[idx], joints=out.joints[idx], full_pose=out.full_pose[idx])
-            loss = loss.index_copy(0, idx, self.volume.collision_loss(sub, pts, reduction="sum").to(loss.dtype))
+            keys = getattr(self.volume, "warm_keys", None)
+            with keys(idx.cpu() if ids is None else ids[idx.cpu()]) if keys else contextlib.nullcontext():
+                pen = self.volume.collision_loss(sub, pts, reduction="sum")
+            loss = loss.index_copy(0, idx, pen.to(loss.dtype))
         self.last_stats = {"rows": R, "active_rows": sum(len(g) for g in groups.values()), "groups": len(groups),
                            "points": n_points, "part_pairs": int(need.sum())}
         return loss
@@ -146,7 +152,7 @@ class SceneCollision:
         ft = frame_subset(T, self.frames)
         rows = (np.arange(B)[:, None] * T + ft[None]).reshape(-1)
         out = walk_output(walk, torch.as_tensor(rows, device=walk.vertices.device))
-        vals = self.per_frame(out).reshape(B, len(ft))
+        vals = self.per_frame(out, torch.as_tensor(rows)).reshape(B, len(ft))
         self.last = vals.detach()
         return vals.mean(dim=1)
 

@@ -24,8 +24,8 @@ import torch
 
 from volsmpl.apps.checks import applies, claim_out, number, safe_name
 from volsmpl.apps.progress import progress, steps_bar
-from volsmpl.apps.table import (add_common, check_common, checkpoint_names, CaseRecords, envelope, flag_cases,
-                                print_flagged, volumes, write_results)
+from volsmpl.apps.table import (add_common, check_common, checkpoint_names, code_refinement, CaseRecords, envelope,
+                                flag_cases, print_flagged, volumes, write_results)
 
 from .bodies import take_away, writes_meshes
 from .cases import CASES_FILE, load_cases
@@ -104,7 +104,7 @@ def _case_names(text: str) -> list[str] | None:
 _COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device", "cases", "case_file"}
 USES = {"run": _COMMON | {"resume", "render", "save_meshes", "random_init", "preset", "lr", "max_iters", "w_selfpen",
                           "w_prior", "limits", "hold", "n_points", "stop_checks", "tau", "patience", "stall_rtol", "max_step", "code_grad",
-                          "sampler_seed"},
+                          "sampler_seed", "refine_steps", "refine_warm"},
         "tune": _COMMON | {"max_iters", "stop_checks", "tau", "patience", "grid_lr", "grid_w_selfpen", "grid_w_prior",
                            "combine"}}
 
@@ -154,7 +154,7 @@ def run(args) -> int:
     cases = load_cases(args.case_file, _case_names(args.cases))
     with claim_out(args.out, "selfpen"):
         body = volsmpl.create_body().to(cfg.device)
-        vols = volumes(body, models, ckpts, cfg.device, random_init=args.random_init)
+        vols = volumes(body, models, ckpts, cfg.device, random_init=args.random_init, refine=code_refinement(args))
         if args.action == "tune":
             from .tune import run_tune
             return run_tune(args, body, vols, cases, checkpoint_names(models, ckpts))
@@ -167,6 +167,7 @@ def _repair(args, cfg, body, vols: dict, cases: list, models: list, ckpts: dict)
         print("note: --random-init: untrained networks, the numbers only check the pipeline")
     config = {**asdict(cfg), "preset": args.preset, "models": models, "random_init": bool(args.random_init),
               "checkpoints": checkpoint_names(models, ckpts, args.random_init), "case_file": str(args.case_file),
+              "code_refinement": code_refinement(args),
               "device_name": torch.cuda.get_device_name(0) if cfg.device == "cuda" else "cpu",
               "threads": torch.get_num_threads()}
     store = CaseRecords(args.out, "selfpen", resume=args.resume)

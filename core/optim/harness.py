@@ -21,6 +21,7 @@ optimises each as if alone, except for the optimiser's shared learning-rate sche
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from dataclasses import dataclass, field
@@ -161,7 +162,8 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
         optimizer: 'adam', 'adamw', 'sgd' or a factory(param_groups, lr) -> torch.optim.Optimizer.
         lr: learning rate; schedule: iteration -> multiplier of every group's lr (torch LambdaLR).
         max_iters: update cap (a MaxIters rule appended unless `stops` holds one); stops: StopRule list.
-        frozen: modules whose parameters get no gradient during the run (restored after).
+        frozen: modules whose parameters get no gradient during the run (restored after); a volume set to warm
+            code refinement (`Volume.set_code_refinement(steps, warm=True)`) opens one `warm_start` for the run.
         device: where time and memory are measured (default: the first variable's device).
         progress: tqdm bar (None: only on a terminal and for runs of 50 iterations or more).
         usable: variables {name: (B, ...)} -> (B,) bool, the problems whose values the next evaluation can take
@@ -213,7 +215,10 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
     try:
         for p, _ in flags:
             p.requires_grad_(False)
-        with Meter(dev) as meter:
+        with contextlib.ExitStack() as warm, Meter(dev) as meter:
+            for m in frozen:   # volumes set to warm code refinement carry their codes through this run
+                if hasattr(m, "warm_start"):
+                    warm.enter_context(m.warm_start())
             for it in range(cap + 1):
                 t0 = time.perf_counter()
                 state = State(params)

@@ -1,7 +1,7 @@
 """Volumes attached to a body: the model registry, the shared `BodyVolume` answers (one sign convention), the
 learned `Volume` (VolumetricSMPL, COAP), the exact 'mesh' kind, and what they share (collision and
 self-penetration reductions, input checks, mesh extraction, the encoding cache, reduced precision, code
-refinement). `volume.engine` holds the query engine's internals.
+refinement, cold or carried along an optimisation). `volume.engine` holds the query engine's internals.
 
     vol = attach_volume(body, model="coap")         # any registered kind: "volsmpl", "coap", "mesh"
     d = vol.signed(out, points)                     # (B, N): negative inside
@@ -13,6 +13,7 @@ from volsmpl.volume.learned import Volume
 from volsmpl.volume.mesh_kind import MeshVolume
 from volsmpl.volume.models import MODELS, ModelKind, checkpoint_model, learned_models, model_kind, parse_models
 from volsmpl.volume.precision import PRECISIONS
+from volsmpl.volume.warm_codes import WarmCodes
 
 __all__ = ["MODELS", "PRECISIONS", "BodyVolume", "MeshVolume", "ModelKind", "Volume", "attach_volume",
-           "checkpoint_model", "learned_models", "model_kind", "parse_models", "reduce_penetration"]
+           "WarmCodes", "checkpoint_model", "learned_models", "model_kind", "parse_models", "reduce_penetration"]

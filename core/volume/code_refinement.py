@@ -29,7 +29,7 @@ import torch
 
 from volsmpl.nn.code_refiner import decode_targets, refinement_losses
 
-__all__ = ["REFINE_LR", "REFINE_SIGMA", "refinement_points", "refine_codes", "check_refine_steps"]
+__all__ = ["REFINE_LR", "REFINE_SIGMA", "refinement_points", "adam_steps", "refine_codes", "check_refine_steps"]
 
 #: Adam's initial step size on z (cosine-decayed to 0 over the steps)
 REFINE_LR = 1e-2
@@ -75,27 +75,43 @@ def refinement_points(partition, vertices: torch.Tensor, G: torch.Tensor, center
     return local, t, scale
 
 
+def adam_steps(net, z: torch.Tensor, xin: torch.Tensor, target: torch.Tensor, scale, parts, steps: int,
+               m1: torch.Tensor, m2: torch.Tensor, t: torch.Tensor, lr: float = REFINE_LR,
+               cosine: bool = True) -> torch.Tensor:
+    """`steps` Adam steps (torch.optim.Adam's update, betas 0.9 / 0.999, eps 1e-8) on the parts' refinement losses
+    from the codes z, with the moments m1, m2 and the step counts t updated in place; returns the codes reached
+    (detached). cosine: the step size decays from lr to 0 over these steps (cold refinement); else constant.
+
+    Shape: z, m1, m2 (B, K', latent) of `parts` ((K',) ids, None: all K); t (B, K', 1) steps taken so far per
+    (body, part) (Adam's bias correction); xin / target / scale from `refinement_points` -> (B, K', latent).
+    """
+    var = z.detach().clone().requires_grad_(True)
+    beta1, beta2, eps = 0.9, 0.999, 1e-8
+    with torch.enable_grad():
+        for i in range(steps):
+            pred = decode_targets(net, var, xin, scale, parts)
+            (grad,) = torch.autograd.grad(refinement_losses(net.output, pred, target).sum(), var)
+            t.add_(1)
+            m1.mul_(beta1).add_(grad, alpha=1 - beta1)
+            m2.mul_(beta2).addcmul_(grad, grad, value=1 - beta2)
+            step_lr = lr * 0.5 * (1 + math.cos(math.pi * i / steps)) if cosine else lr
+            denom = (m2 / (1 - beta2 ** t)).sqrt_().add_(eps)
+            with torch.no_grad():
+                var.addcdiv_(m1 / (1 - beta1 ** t), denom, value=-step_lr)
+    return var.detach()
+
+
 def refine_codes(net, z: torch.Tensor, xin: torch.Tensor, target: torch.Tensor, scale, parts, steps: int,
                  lr: float = REFINE_LR) -> torch.Tensor:
-    """z + delta: the codes after `steps` Adam steps on the parts' refinement losses (module docstring), the
-    correction delta a constant for autograd; z itself for steps = 0.
+    """z + delta: the codes after `steps` Adam steps (cosine-decayed step size) on the parts' refinement losses
+    (module docstring), from fresh moments, the correction delta a constant for autograd; z itself for steps = 0.
 
     Shape: z (B, K', latent) codes of `parts` ((K',) ids, None: all K), xin / target / scale from
     `refinement_points` -> (B, K', latent).
     """
     if check_refine_steps(steps) == 0 or z.shape[1] == 0:
         return z
-    var = z.detach().clone().requires_grad_(True)
-    m1, m2 = torch.zeros_like(var), torch.zeros_like(var)
-    beta1, beta2, eps = 0.9, 0.999, 1e-8
-    with torch.enable_grad():
-        for i in range(steps):
-            pred = decode_targets(net, var, xin, scale, parts)
-            (grad,) = torch.autograd.grad(refinement_losses(net.output, pred, target).sum(), var)
-            m1.mul_(beta1).add_(grad, alpha=1 - beta1)
-            m2.mul_(beta2).addcmul_(grad, grad, value=1 - beta2)
-            step_lr = lr * 0.5 * (1 + math.cos(math.pi * i / steps))
-            denom = (m2 / (1 - beta2 ** (i + 1))).sqrt_().add_(eps)
-            with torch.no_grad():
-                var.addcdiv_(m1, denom, value=-step_lr / (1 - beta1 ** (i + 1)))
-    return z + (var.detach() - z.detach())
+    m1, m2 = torch.zeros_like(z.detach()), torch.zeros_like(z.detach())
+    t = z.new_zeros(*z.shape[:2], 1)
+    var = adam_steps(net, z, xin, target, scale, parts, steps, m1, m2, t, lr, cosine=True)
+    return z + (var - z.detach())

@@ -18,11 +18,14 @@ min over parts; points in no box get the analytic box SDF (paper eq. 4).
 """
 from __future__ import annotations
 
+import contextlib
+
 import torch
 from torch.profiler import record_function
 
 from volsmpl.geometry.boxes import inside_boxes, near_boxes, part_normalization
 from volsmpl.volume.code_refinement import check_refine_steps, refine_codes, refinement_points
+from volsmpl.volume.warm_codes import WarmCodes
 from volsmpl.volume.collision import reduce_penetration
 from volsmpl.volume.engine.encode_graph import EncodeGraphs
 from volsmpl.volume.encoding import Encoding, EncodingCache
@@ -124,6 +127,9 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         self.kind = kind_of_network(net)  # the registry's name of this model ('volsmpl', 'coap')
         self.set_precision(precision)
         self.refine_steps = 0   # set_code_refinement
+        self.refine_warm = False
+        self.warm: WarmCodes | None = None   # the open warm_start's state
+        self.warm_serial = 0                 # warm_start scopes opened so far (part of the cache key)
         self.cuda_graphs = bool(cuda_graphs)
         self.encode_graphs = EncodeGraphs()  # the captured encodes (used when cuda_graphs is on)
         self.cuda_graph_queries = bool(cuda_graph_queries)
@@ -186,7 +192,9 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
                     xin, target, sc = refinement_points(p, v, Gs, cs, ss, parts)
                     if self.net.refiner is not None:   # the learned passes, also in training
                         z = self.net.refiner(self.net, z, xin, target, sc, parts)
-                    if fit:
+                    if fit and self.warm is not None:
+                        z = self.warm.refine(self.net, z, xin, target, sc, parts)
+                    elif fit:
                         z = refine_codes(self.net, z, xin, target, sc, parts, self.refine_steps)
                 code = self.net.code_from_z(z, parts)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, center=center,
@@ -276,13 +284,42 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         self.partition.set_draws(draws)
         return self
 
-    def set_code_refinement(self, steps: int) -> "Volume":
+    def set_code_refinement(self, steps: int, warm: bool = False) -> "Volume":
         """Refine each fresh encoding's part codes by `steps` Adam steps on the posed mesh's own surface
         (volsmpl.volume.code_refinement; 0, the default: the encoder's codes as they are); returns self. Not while
         training, nor on training's fresh surface draws. Encodings cached before are not reused (their key holds
-        the setting). ValueError (one line) for steps < 0."""
-        self.refine_steps = check_refine_steps(steps)
+        the setting). warm: inside `warm_start()` (the optimisation harness opens one per run), each encoding
+        continues the same bodies' refinement from the previous encoding (volsmpl.volume.warm_codes) with `steps`
+        steps at a constant step size; outside one, each encoding is refined from the encoder's codes.
+        ValueError (one line) for steps < 0, or warm with steps 0."""
+        steps = check_refine_steps(steps)
+        if warm and steps == 0:
+            raise ValueError("warm code refinement needs steps >= 1 per encoding (e.g. --refine-steps 1)")
+        self.refine_steps, self.refine_warm = steps, bool(warm)
         return self
+
+    @contextlib.contextmanager
+    def warm_start(self):
+        """One optimisation's scope of warm code refinement (`set_code_refinement(steps, warm=True)`): the
+        encodings inside carry their bodies' code corrections from one to the next; yields the WarmCodes state
+        (its counters), or None where the volume is not set to warm refinement. Encodings cached outside the
+        scope are not reused inside it, nor the scope's outside."""
+        if not (self.refine_warm and self.refine_steps):
+            yield None
+            return
+        before = self.warm, self.warm_serial
+        self.warm_serial += 1
+        self.warm = WarmCodes(self.num_parts, self.refine_steps)
+        try:
+            yield self.warm
+        finally:
+            self.warm = before[0]
+            self.warm_serial += 1   # the scope's encodings are not served after it
+
+    def warm_keys(self, ids):
+        """Inside `warm_start`: the encodings inside this context hold the bodies `ids` ((B,) distinct ints,
+        WarmCodes.keys); elsewhere nothing."""
+        return contextlib.nullcontext() if self.warm is None else self.warm.keys(ids)
 
     def set_precision(self, precision: str) -> "Volume":
         """Set the decoders' arithmetic ('full', 'bf16' or 'tf32'; see the class docstring); returns self.

@@ -18,6 +18,9 @@ encoder's codes move from one step to the next, against how far each is from the
 state must not hand one body's correction to another).
 
 `--carry code` keeps the refined code itself instead of the correction (z_t = z_{t-1}, the encoder read once).
+With the defaults (`--schedule constant --carry delta`) the warm codes are the volume's own
+(`Volume.set_code_refinement(steps, warm=True)` inside `warm_start()`, volsmpl.volume.warm_codes), which drops a
+(body, part)'s correction where its encoder code moved by more than `--max-change` of its norm in one step.
 """
 import argparse
 import dataclasses
@@ -33,11 +36,15 @@ from volsmpl.evaluation.validation_set import validation_bodies
 from volsmpl.nn.code_refiner import decode_targets, refinement_losses
 from volsmpl.volume.attach import attach_volume
 from volsmpl.volume.code_refinement import refinement_points
+from volsmpl.volume.warm_codes import WARM_MAX_CHANGE
 
 
 def encoder_codes(vol, out):
     """A fresh encoding of `out` (the encoder and any learned passes, no fitting), and its refinement points."""
+    steps, warm = vol.refine_steps, vol.refine_warm
+    vol.set_code_refinement(0)
     enc = vol.encode(out, fresh=True)
+    vol.set_code_refinement(steps, warm=warm)
     xin, target, sc = refinement_points(vol.partition, out.vertices, enc.G, enc.center, enc.scale, None)
     return enc, enc.code.z, xin, target, sc
 
@@ -94,6 +101,8 @@ def main():
     ap.add_argument("--jitter", type=float, default=0.3)
     ap.add_argument("--schedule", default="constant", choices=["constant", "cosine"])
     ap.add_argument("--carry", default="delta", choices=["delta", "code"])
+    ap.add_argument("--max-change", type=float, default=WARM_MAX_CHANGE,
+                    help="the volume's restart threshold (inf: never restart)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
@@ -120,8 +129,19 @@ def main():
 
         drift = {"per_step": [], "between": None}
 
+        core = a.schedule == "constant" and a.carry == "delta"
+
+        def warm_encode(out):
+            return vol.encode(out, fresh=True).code.z.detach()
+
         def warm_predict(out_end, pts, warm=warm, drift=drift):
             z = prev = None
+            scope = None
+            if core:
+                vol.set_code_refinement(steps, warm=True)
+                scope = vol.warm_start()
+                state = scope.__enter__()
+                state.lr, state.max_change = a.lr, a.max_change
             for i in range(a.iters + 1):
                 u = 1 - (1 - i / a.iters) ** 3
                 pose = start + (bodies["body_pose"] - start) * u
@@ -131,8 +151,15 @@ def main():
                 if prev is not None:
                     drift["per_step"].append(((z0 - prev).norm(dim=-1) / prev.norm(dim=-1)).flatten())
                 prev = z0
+                if scope is not None:      # the volume's own warm state
+                    z = warm_encode(out)
+                    continue
                 with torch.enable_grad():
                     z = warm(net, z0, xin, target, sc, i)
+            if scope is not None:
+                drift["restarted"] = state.restarted / max(state.encoded, 1)
+                scope.__exit__(None, None, None)
+                vol.set_code_refinement(0)
             other = torch.cdist(prev.transpose(0, 1), prev.transpose(0, 1))           # (K, B, B)
             other = other.masked_fill(torch.eye(len(prev), dtype=torch.bool), float("inf"))   # another body
             drift["between"] = (other.min(dim=-1).values.T / prev.norm(dim=-1)).flatten()   # (B * K,)
@@ -145,7 +172,8 @@ def main():
                      # |z_t - z_(t-1)| / |z_(t-1)| of the encoder's codes from one step to the next, over all
                      # (step, body, part); and at the end, each (body, part)'s nearest other body's code likewise
                      "code_change_per_step": quantiles(torch.cat(drift["per_step"])),
-                     "code_distance_to_other_bodies": quantiles(drift["between"])})
+                     "code_distance_to_other_bodies": quantiles(drift["between"]),
+                     "restarted_share": drift.get("restarted")})
         print(json.dumps(rows[-1]), flush=True)
     if a.out:
         with open(a.out, "w") as fh:

@@ -408,3 +408,18 @@ def test_resume_recomputes_a_sequence_made_with_another_thread_count(tmp_path):
         assert case.read_text() != first  # recomputed, not reused
     finally:
         torch.set_num_threads(threads)
+
+
+def test_warm_code_refinement_keys_the_frames_by_their_rows(body, short_walk):
+    """With warm code refinement, the collision term's encodings carry each frame's refinement by the frame's row
+    in the walk (frames 0, 4 and 9 of a 3-frame term), not by its position in a group of frames with the same
+    parts, so a frame keeps its own correction whatever group it falls into."""
+    vol = volsmpl.attach_volume(body).set_code_refinement(1, warm=True)
+    x_wall = float(short_walk.joints[0, :, 0, 0].mean()) + 0.12
+    term = O.SceneCollision(vol, np.concatenate([_wall(x_wall), _wall(-x_wall)]), frames=3)
+    with torch.no_grad(), vol.warm_start() as warm:
+        for _ in range(2):
+            term(short_walk)
+    rows = O.frame_subset(short_walk.body_pose.shape[1], 3).tolist()
+    assert rows == [0, 4, 9] or rows == [0, 5, 9]
+    assert sorted(warm.known) == rows and warm.restarted == 0

@@ -1,0 +1,55 @@
+"""The apps' shared options (volsmpl.apps.table): the code refinement options checked before any work in every
+app, set on the learned kinds' volumes, recorded in results.json and in the case records' keys."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from volsmpl.apps.table import CaseRecords, volumes
+from volsmpl.body.model import create_body
+from volsmpl.cli import main as cli_main
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--refine-warm"],
+     ["--refine-warm carries", "--refine-steps 1"]),
+    (["selfpen", "--model", "mesh", "--cases", "deep_squat", "--refine-steps", "2"],
+     ["--refine-steps refines the part codes of volsmpl and coap", "--model mesh"]),
+    (["hoi", "run", "--model", "volsmpl", "--refine-steps", "-1"], ["--refine-steps -1", "integer >= 0"]),
+    (["hoi", "tune", "--refine-steps", "1"], ["--refine-steps", "does not apply to `volsmpl hoi tune`"]),
+    (["motion", "--model", "mesh", "--refine-steps", "1", "--refine-warm"], ["--refine-steps refines", "--model mesh"]),
+    (["egohmr", "sample", "--model", "none", "--refine-steps", "1"], ["--refine-steps", "no guide"]),
+])
+def test_refinement_options_are_checked_before_any_work(argv, words, tmp_path, capsys):
+    assert cli_main(argv + ["--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    for w in words:
+        assert w in err, err
+
+
+def test_volumes_get_the_setting_and_case_keys_hold_it(tmp_path):
+    body = create_body()
+    refine = {"steps": 2, "warm": True}
+    vols = volumes(body, ["volsmpl", "coap", "mesh"], {"volsmpl": None, "coap": None}, refine=refine)
+    assert (vols["volsmpl"].refine_steps, vols["volsmpl"].refine_warm) == (2, True)
+    assert (vols["coap"].refine_steps, vols["coap"].refine_warm) == (2, True)
+    plain = volumes(body, ["volsmpl"], {"volsmpl": None})["volsmpl"]
+    assert plain.refine_steps == 0 and not plain.refine_warm
+    store = CaseRecords(tmp_path, "selfpen")
+    keys = {store.key({"case": "a"}, plain), store.key({"case": "a"}, vols["volsmpl"])}
+    plain.set_code_refinement(2)
+    keys.add(store.key({"case": "a"}, plain))
+    assert len(keys) == 3                                  # none, warm and cold refinement make different records
+
+
+def test_a_warm_run_records_its_setting(tmp_path):
+    rc = cli_main(["selfpen", "--model", "volsmpl", "--cases", "arm_through_head", "--max-iters", "2",
+                   "--n-points", "32", "--threads", "1", "--render", "0", "--refine-steps", "1", "--refine-warm",
+                   "--out", str(tmp_path)])
+    assert rc == 0
+    res = json.loads((tmp_path / "results.json").read_text())
+    assert res["config"]["code_refinement"] == {"steps": 1, "warm": True}
+    (case,) = res["cases"]["volsmpl"]
+    assert case["name"] == "arm_through_head" and len(case["body_pose"]) == 69
