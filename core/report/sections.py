@@ -151,6 +151,21 @@ def flagged_note(data: dict) -> list[str]:
                 + ", ".join(parts) + " (`flagged` in the result)."]
 
 
+def refinement_note(data: dict) -> list[str]:
+    """How the learned back-ends' part codes were made (results.json `config.code_refinement`: {steps, warm}); nothing
+    for a result made before the apps recorded it."""
+    r = (data.get("config") or {}).get("code_refinement")
+    if not isinstance(r, dict):
+        return []
+    steps = r.get("steps") or 0
+    if not steps:
+        return ["", "Part codes: the encoder's, one encoding per body and step (no code refinement)."]
+    how = ("carried from each iteration to the next (`--refine-warm`)" if r.get("warm")
+           else "from the encoder's codes at every encoding")
+    return ["", f"Part codes: {fmt(steps)} refinement step{'' if steps == 1 else 's'} per encoding, {how} "
+                f"(`--refine-steps {fmt(steps)}`; docs/code_refinement.md)."]
+
+
 def _refine_steps(steps) -> str:
     """The cost line's words for R steps of test-time code refinement per encoding ('' for none or not recorded)."""
     return f", {fmt(steps)} refinement step{'' if steps == 1 else 's'} per encoding" if steps else ""
@@ -320,7 +335,7 @@ def summary_section(ctx) -> list[str]:
     n = n_cases(d)
     if n is not None:
         out += ["", f"{n} per-case records in the result (`cases`)."]
-    return out + flagged_note(d)
+    return out + refinement_note(d) + flagged_note(d)
 
 
 def paired_table(p) -> list[str]:

@@ -77,10 +77,11 @@ def refinement_points(partition, vertices: torch.Tensor, G: torch.Tensor, center
 
 def adam_steps(net, z: torch.Tensor, xin: torch.Tensor, target: torch.Tensor, scale, parts, steps: int,
                m1: torch.Tensor, m2: torch.Tensor, t: torch.Tensor, lr: float = REFINE_LR,
-               cosine: bool = True) -> torch.Tensor:
+               cosine: bool = True, warmup: int = 0) -> torch.Tensor:
     """`steps` Adam steps (torch.optim.Adam's update, betas 0.9 / 0.999, eps 1e-8) on the parts' refinement losses
     from the codes z, with the moments m1, m2 and the step counts t updated in place; returns the codes reached
     (detached). cosine: the step size decays from lr to 0 over these steps (cold refinement); else constant.
+    warmup: each (body, part)'s step size is scaled by min(1, t / warmup) at its t-th step (0: not scaled).
 
     Shape: z, m1, m2 (B, K', latent) of `parts` ((K',) ids, None: all K); t (B, K', 1) steps taken so far per
     (body, part) (Adam's bias correction); xin / target / scale from `refinement_points` -> (B, K', latent).
@@ -96,8 +97,9 @@ def adam_steps(net, z: torch.Tensor, xin: torch.Tensor, target: torch.Tensor, sc
             m2.mul_(beta2).addcmul_(grad, grad, value=1 - beta2)
             step_lr = lr * 0.5 * (1 + math.cos(math.pi * i / steps)) if cosine else lr
             denom = (m2 / (1 - beta2 ** t)).sqrt_().add_(eps)
+            rise = (t / warmup).clamp(max=1.0) if warmup else 1.0
             with torch.no_grad():
-                var.addcdiv_(m1 / (1 - beta1 ** t), denom, value=-step_lr)
+                var.addcdiv_(m1 * rise / (1 - beta1 ** t), denom, value=-step_lr)
     return var.detach()
 
 

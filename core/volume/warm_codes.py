@@ -4,8 +4,10 @@ An optimisation (an app's fit, repair or motion) re-encodes its bodies at every 
 to the next a body moves little. `WarmCodes` keeps, per (body key, part), what refining that part's code reached
 at the previous encoding: the correction delta = refined code - encoder's code, Adam's moments and step count, and
 the encoder's code it was made from. The next encoding of that (key, part) starts from z + delta with those
-moments and takes `steps` Adam steps at the constant step size `lr` on the part's refinement loss (the points,
-loss and update of `volsmpl.volume.code_refinement`). After T iterations a body that moved little has had T * steps
+moments and takes `steps` Adam steps at the step size `lr` on the part's refinement loss (the points, loss and
+update of `volsmpl.volume.code_refinement`), rising linearly over the first `warmup` steps of each (body, part):
+Adam's first steps move every coordinate by about the full step size whatever its gradient, which from the encoder's
+codes makes them worse (one such step: 91.36 -> 85.79 mean IoU on 16 validation bodies). After T iterations a body that moved little has had T * steps
 steps of refinement at the cost of `steps` per encoding.
 
 A (key, part) whose encoder code moved by more than `max_change` of its norm since the last encoding starts
@@ -35,6 +37,8 @@ __all__ = ["WarmCodes", "WARM_MAX_CHANGE"]
 #: relative change |z - z_prev| / |z_prev| of a (body, part)'s encoder code above which its carried correction
 #: is dropped (docs/code_refinement.md, "Warm-started along an optimisation")
 WARM_MAX_CHANGE = 0.05
+#: steps over which a (body, part)'s step size rises linearly to lr from its first (or restarted) step
+WARM_WARMUP = 10
 
 
 class WarmCodes:
@@ -45,16 +49,21 @@ class WarmCodes:
         steps: Adam steps per encoding (>= 1).
         lr: the constant step size.
         max_change: relative encoder-code change that restarts a (key, part) (> 0; inf: never).
+        warmup: a (key, part)'s step size is lr * min(1, t / warmup) at its t-th step since its (re)start (0: lr).
     Counters: `encoded` (body, part) codes refined so far, `restarted` of them started afresh after a jump;
     `known`: the body keys seen.
     """
 
-    def __init__(self, num_parts: int, steps: int = 1, lr: float = REFINE_LR, max_change: float = WARM_MAX_CHANGE):
+    def __init__(self, num_parts: int, steps: int = 1, lr: float = REFINE_LR, max_change: float = WARM_MAX_CHANGE,
+                 warmup: int = WARM_WARMUP):
         if check_refine_steps(steps) < 1:
             raise ValueError(f"warm code refinement needs steps >= 1 per encoding, got {steps}")
         if not max_change > 0:
             raise ValueError(f"max_change must be > 0 (a relative code change), got {max_change}")
+        if not isinstance(warmup, int) or warmup < 0:
+            raise ValueError(f"warmup must be an integer >= 0 (steps), got {warmup!r}")
         self.num_parts, self.steps, self.lr, self.max_change = int(num_parts), steps, float(lr), float(max_change)
+        self.warmup = warmup
         self._ids: torch.Tensor | None = None
         self._rows: dict[int, int] = {}
         self._state: dict[str, torch.Tensor] = {}
@@ -119,7 +128,8 @@ class WarmCodes:
         restart = had & (change > self.max_change)
         fresh = (~had | restart)[..., None]
         delta, m1, m2, t = (x.masked_fill(fresh, 0) for x in (delta, m1, m2, t))
-        var = adam_steps(net, zd + delta, xin, target, scale, parts, self.steps, m1, m2, t, self.lr, cosine=False)
+        var = adam_steps(net, zd + delta, xin, target, scale, parts, self.steps, m1, m2, t, self.lr, cosine=False,
+                         warmup=self.warmup)
         s["delta"][rows, kk], s["m1"][rows, kk], s["m2"][rows, kk] = var - zd, m1, m2
         s["t"][rows, kk], s["zref"][rows, kk], s["have"][rows, kk] = t, zd, True
         self.encoded += B * Kc

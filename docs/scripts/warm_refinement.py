@@ -36,7 +36,7 @@ from volsmpl.evaluation.validation_set import validation_bodies
 from volsmpl.nn.code_refiner import decode_targets, refinement_losses
 from volsmpl.volume.attach import attach_volume
 from volsmpl.volume.code_refinement import refinement_points
-from volsmpl.volume.warm_codes import WARM_MAX_CHANGE
+from volsmpl.volume.warm_codes import WARM_MAX_CHANGE, WARM_WARMUP
 
 
 def encoder_codes(vol, out):
@@ -103,6 +103,7 @@ def main():
     ap.add_argument("--carry", default="delta", choices=["delta", "code"])
     ap.add_argument("--max-change", type=float, default=WARM_MAX_CHANGE,
                     help="the volume's restart threshold (inf: never restart)")
+    ap.add_argument("--warmup", type=int, default=WARM_WARMUP, help="the volume's step-size warm-up (0: none)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
@@ -141,7 +142,7 @@ def main():
                 vol.set_code_refinement(steps, warm=True)
                 scope = vol.warm_start()
                 state = scope.__enter__()
-                state.lr, state.max_change = a.lr, a.max_change
+                state.lr, state.max_change, state.warmup = a.lr, a.max_change, a.warmup
             for i in range(a.iters + 1):
                 u = 1 - (1 - i / a.iters) ** 3
                 pose = start + (bodies["body_pose"] - start) * u
