@@ -30,7 +30,7 @@ import contextlib
 
 import torch
 
-from volsmpl.volume.code_refinement import REFINE_LR, adam_steps, check_refine_steps
+from volsmpl.volume.code_refinement import REFINE_LR, REFINE_WARMUP, adam_steps, check_refine_steps
 
 __all__ = ["WarmCodes", "WARM_MAX_CHANGE"]
 
@@ -38,7 +38,7 @@ __all__ = ["WarmCodes", "WARM_MAX_CHANGE"]
 #: is dropped (docs/code_refinement.md, "Warm-started along an optimisation")
 WARM_MAX_CHANGE = 0.05
 #: steps over which a (body, part)'s step size rises linearly to lr from its first (or restarted) step
-WARM_WARMUP = 10
+WARM_WARMUP = REFINE_WARMUP
 
 
 class WarmCodes:

@@ -162,3 +162,31 @@ def test_cuda_refinement_matches_the_cpu(shipped):
         got = gvol.query(gout, pts.to("cuda")).cpu()
     # float32 on another device: the ten steps round otherwise; a wrong device path would be off by millimetres
     assert torch.allclose(got, ref, atol=2e-4, rtol=0), (got - ref).abs().max()
+
+
+def test_refinement_is_adams_steps_on_the_warmed_up_cosine_schedule(shipped):
+    """refine_codes against torch.optim.Adam with the step size REFINE_LR * min(1, i / REFINE_WARMUP) * the cosine
+    decay 0.5 (1 + cos(pi (i - 1) / R)) at the i-th of R steps."""
+    import math
+
+    from volsmpl.nn.code_refiner import decode_targets, refinement_losses
+    from volsmpl.volume.code_refinement import REFINE_LR, REFINE_WARMUP
+
+    _, vol, _, out = shipped
+    steps = vol.refine_steps
+    vol.set_code_refinement(0)
+    enc = vol.encode(out, fresh=True)
+    vol.set_code_refinement(steps)
+    z0 = enc.code.z.detach()
+    xin, target, sc = refinement_points(vol.partition, out.vertices, enc.G, enc.center, enc.scale)
+    R = 12
+    ours = refine_codes(vol.net, z0, xin, target, sc, None, R)
+    var = z0.clone().requires_grad_(True)
+    opt = torch.optim.Adam([var], lr=REFINE_LR)
+    for i in range(1, R + 1):
+        opt.param_groups[0]["lr"] = REFINE_LR * min(1.0, i / REFINE_WARMUP) * 0.5 * (1 + math.cos(math.pi * (i - 1) / R))
+        opt.zero_grad()
+        refinement_losses(vol.net.output, decode_targets(vol.net, var, xin, sc, None), target).sum().backward()
+        opt.step()
+    off = (ours - var.detach()).abs() > 1e-5     # but for coordinates whose gradient is at rounding level
+    assert off.float().mean() < 0.01 and (ours - z0).norm() > 10 * (ours - var.detach()).norm()
