@@ -33,7 +33,7 @@ HOI = {"summary": {"volsmpl": {"iter_ms": 12.5, "total_min": 0.2, "collision_pct
 
 
 def test_app_table_beside_the_paper_and_missing_ones_listed(tmp_path):
-    res = write(tmp_path / "out" / "hoi" / "results.json", HOI)
+    write(tmp_path / "out" / "hoi" / "results.json", HOI)
     (tmp_path / "out" / "hoi" / "fig.png").write_bytes(b"png")
     write(tmp_path / "docs" / "eval_coap_anny.json", {"metrics": {"iou_mean": 0.5, "iou_surf": 0.4, "iou_unif": 0.6},
                                                      "config": {"device": "cpu"}})
