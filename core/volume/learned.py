@@ -18,13 +18,12 @@ min over parts; points in no box get the analytic box SDF (paper eq. 4).
 """
 from __future__ import annotations
 
-import contextlib
-
 import torch
 from torch.profiler import record_function
 
 from volsmpl.geometry.boxes import inside_boxes, near_boxes, part_normalization
-from volsmpl.volume.code_refinement import check_refine_steps, refine_codes, refinement_points
+from volsmpl.volume.code_refinement import refine_codes, refinement_points
+from volsmpl.volume.refinement_setting import CodeRefinementSetting
 from volsmpl.volume.warm_codes import WarmCodes
 from volsmpl.volume.collision import reduce_penetration
 from volsmpl.volume.engine.encode_graph import EncodeGraphs
@@ -43,7 +42,7 @@ from volsmpl.volume.input_checks import check_points, nonfinite_points_error
 from volsmpl.volume.api import BodyVolume, check_output
 
 
-class Volume(EncodingCache, LeanQuery, BodyVolume):
+class Volume(EncodingCache, CodeRefinementSetting, LeanQuery, BodyVolume):
     """Volumetric extension of one body model (signed distance, or occupancy for COAP); see the module docstring.
     `attach_volume` builds it. Every switch below is also an attribute of the same name that may be changed on a
     built volume (precision through `set_precision`); `volsmpl bench` measures its variants by them
@@ -283,43 +282,6 @@ class Volume(EncodingCache, LeanQuery, BodyVolume):
         not reused (their key holds the sample set). ValueError (one line) for draws < 1."""
         self.partition.set_draws(draws)
         return self
-
-    def set_code_refinement(self, steps: int, warm: bool = False) -> "Volume":
-        """Refine each fresh encoding's part codes by `steps` Adam steps on the posed mesh's own surface
-        (volsmpl.volume.code_refinement; 0, the default: the encoder's codes as they are); returns self. Not while
-        training, nor on training's fresh surface draws. Encodings cached before are not reused (their key holds
-        the setting). warm: inside `warm_start()` (the optimisation harness opens one per run), each encoding
-        continues the same bodies' refinement from the previous encoding (volsmpl.volume.warm_codes) with `steps`
-        steps at a constant step size; outside one, each encoding is refined from the encoder's codes.
-        ValueError (one line) for steps < 0, or warm with steps 0."""
-        steps = check_refine_steps(steps)
-        if warm and steps == 0:
-            raise ValueError("warm code refinement needs steps >= 1 per encoding (e.g. --refine-steps 1)")
-        self.refine_steps, self.refine_warm = steps, bool(warm)
-        return self
-
-    @contextlib.contextmanager
-    def warm_start(self):
-        """One optimisation's scope of warm code refinement (`set_code_refinement(steps, warm=True)`): the
-        encodings inside carry their bodies' code corrections from one to the next; yields the WarmCodes state
-        (its counters), or None where the volume is not set to warm refinement. Encodings cached outside the
-        scope are not reused inside it, nor the scope's outside."""
-        if not (self.refine_warm and self.refine_steps):
-            yield None
-            return
-        before = self.warm, self.warm_serial
-        self.warm_serial += 1
-        self.warm = WarmCodes(self.num_parts, self.refine_steps)
-        try:
-            yield self.warm
-        finally:
-            self.warm = before[0]
-            self.warm_serial += 1   # the scope's encodings are not served after it
-
-    def warm_keys(self, ids):
-        """Inside `warm_start`: the encodings inside this context hold the bodies `ids` ((B,) distinct ints,
-        WarmCodes.keys); elsewhere nothing."""
-        return contextlib.nullcontext() if self.warm is None else self.warm.keys(ids)
 
     def set_precision(self, precision: str) -> "Volume":
         """Set the decoders' arithmetic ('full', 'bf16' or 'tf32'; see the class docstring); returns self.
