@@ -92,6 +92,11 @@ SECTIONS: dict[str, Section] = {
          "refiner_cost": f"python docs/scripts/refiner_cost.py --checkpoint {_BASE} {_R1} {_REFINER} "
                          f"--refine-steps 0 1 --out docs/refiner_cost.json"},
         rs.eval_section, ("docs/surfaces.png", "docs/sdf_slice.png"), _CKPTS + (_REFINER + ".safetensors",)),
+    "app_cost": Section(
+        "Volumetric bodies: cost in the apps", ("3", "4", "5", "6"), ("apps", "tools/app_cost.py"),
+        {"app_cost": "docs/app_cost.json"},
+        {"app_cost": "python tools/app_cost.py --rounds 3 --threads 1 --out docs/app_cost.json"},
+        rs.app_cost_section, (), _CKPTS + tuple(c + ".safetensors" for c in (_BASE, _R1, _REFINER))),
     "bench": Section(
         "Volumetric bodies: time and memory; winding numbers", ("1", "C.4"),
         ("core/bench", "core/runtime/meter.py"),

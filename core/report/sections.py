@@ -219,6 +219,34 @@ def eval_section(ctx) -> list[str]:
     return [paper_caption("1"), ""] + md_table(header, rows) + [""] + lines
 
 
+def app_cost_section(ctx) -> list[str]:
+    """Each app's time per iteration with each VolumetricSMPL setting, and its ratio to the shipped model's, from
+    `tools/app_cost.py` (result 'app_cost'): the cost of a model or refinement setting as an app meets it."""
+    d = ctx["results"].get("app_cost") or {}
+    med, ratio, work = d.get("median") or {}, d.get("ratio_to_shipped") or {}, d.get("workloads") or {}
+    settings = list(d.get("settings") or {})
+    header = ["setting"] + [f"{a} [{(work.get(a) or {}).get('unit', '?')}]" for a in med]
+    rows = []
+    for s in settings:
+        cells = []
+        for a in med:
+            r = (ratio.get(a) or {}).get(s)
+            cells.append(fmt(med[a].get(s)) + ("" if r is None else f" ({r:.2f}x)"))
+        rows.append([f"`{s}`"] + cells)
+    meta = d.get("meta") or {}
+    lines = [f"Time per iteration of VolumetricSMPL in each app, the median of {len(d.get('rounds') or [])} rounds "
+             f"(each round runs every setting in turn), and its ratio to the shipped model's; "
+             f"{fmt(meta.get('threads'))} thread on {meta.get('cpu', 'a CPU not recorded')}.", ""]
+    lines += md_table(header, rows) + [""]
+    lines += [f"- `{s}`: " + (" ".join(f) if f else "the shipped model, no flags")
+              for s, f in (d.get("settings") or {}).items()]
+    for a, w in work.items():
+        reads = w.get("reads") if isinstance(w.get("reads"), list) else [w.get("reads")]
+        lines.append(f"- {a}: `volsmpl {' '.join(w.get('command') or [])}`, reading `{reads[0]}`"
+                     + (f" (kept beside it: {', '.join(map(str, reads[1:]))})" if len(reads) > 1 else ""))
+    return lines
+
+
 _BENCH_LABELS = {"volsmpl": "VolumetricSMPL (sparse)", "volsmpl-dense": "VolumetricSMPL, dense",
                  "coap": "COAP as published", "coap-sparse": "COAP on our sparse engine"}
 
