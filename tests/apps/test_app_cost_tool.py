@@ -1,0 +1,49 @@
+"""tools/app_cost.py with the apps' runs replaced by known times: medians over rounds, ratios, refusals."""
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+spec = importlib.util.spec_from_file_location("app_cost", Path(__file__).parents[2] / "tools" / "app_cost.py")
+tool = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(tool)
+
+
+def run(monkeypatch, *argv):
+    monkeypatch.setattr(sys, "argv", ["app_cost.py", *argv])
+    return tool.main()
+
+
+def test_medians_over_rounds_and_ratios_to_the_shipped_model(tmp_path, monkeypatch):
+    # round r: shipped 10, 30, 20 ms; r3 25, 60, 35 ms -> medians 20 and 35, ratio 1.75
+    times = {"shipped": [10.0, 30.0, 20.0], "r3": [25.0, 60.0, 35.0]}
+    calls = []
+
+    def fake(app, setting, threads, workdir):
+        calls.append((app, setting))
+        r = sum(1 for a, s in calls if (a, s) == (app, setting)) - 1
+        return {k: times[setting][r] * (1 + i) for i, k in enumerate(tool.APPS[app][1])}, 0.0
+
+    monkeypatch.setattr(tool, "run_one", fake)
+    out = tmp_path / "cost.json"
+    argv = ["--apps", "selfpen,motion", "--settings", "shipped,r3", "--rounds", "3", "--out", str(out)]
+    assert run(monkeypatch, *argv) == 0
+    res = json.loads(out.read_text())
+    assert calls[:4] == [("selfpen", "shipped"), ("selfpen", "r3"), ("motion", "shipped"), ("motion", "r3")]
+    assert res["median"]["selfpen"] == {"shipped": 20.0, "r3": 35.0}
+    assert res["median"]["motion"] == {"shipped": 20.0, "r3": 35.0}        # the first key read is tabulated
+    assert res["rounds"][1]["motion"]["r3"] == {"ms_per_frame_fwdbwd": 60.0, "ms_per_iter": 120.0}
+    assert res["ratio_to_shipped"]["selfpen"]["r3"] == pytest.approx(1.75)
+    assert res["checkpoints"] == {"shipped": "core/assets/volsmpl_anny",
+                                  "r3": "checkpoints/volsmpl_r3/ckpt-00057000/model"}
+
+
+def test_unknown_apps_and_settings_are_refused_in_one_line(tmp_path, monkeypatch):
+    with pytest.raises(SystemExit, match="unknown app 'hoii'"):
+        run(monkeypatch, "--apps", "hoii", "--out", str(tmp_path / "x.json"))
+    with pytest.raises(SystemExit, match="unknown setting 'r9'"):
+        run(monkeypatch, "--settings", "shipped,r9", "--out", str(tmp_path / "x.json"))
+    with pytest.raises(SystemExit, match="must be >= 1"):
+        run(monkeypatch, "--rounds", "0", "--out", str(tmp_path / "x.json"))
