@@ -241,7 +241,7 @@ def app_cost_section(ctx) -> list[str]:
     lines += [f"- `{s}`: " + (" ".join(f) if f else "the shipped model, no flags")
               for s, f in (d.get("settings") or {}).items()]
     for a, w in work.items():
-        reads = w.get("reads") if isinstance(w.get("reads"), list) else [w.get("reads")]
+        reads = w.get("reads") or ["?"]
         lines.append(f"- {a}: `volsmpl {' '.join(w.get('command') or [])}`, reading `{reads[0]}`"
                      + (f" (kept beside it: {', '.join(map(str, reads[1:]))})" if len(reads) > 1 else ""))
     return lines
