@@ -5,7 +5,7 @@ command (or a Python script: its path and arguments) run in the same process.
         --n-bodies 16 --split standard --threads 1 --out /tmp/k64.json
     python docs/scripts/pass_points.py 64 selfpen --model volsmpl \\
         --checkpoint-volsmpl checkpoints/volsmpl_r3/ckpt-00057000/model --threads 1 --render 0 --out /tmp/sp64
-    python docs/scripts/pass_points.py 64 docs/scripts/warm_refinement.py --checkpoint \
+    python docs/scripts/pass_points.py 64 docs/scripts/warm_refinement.py --checkpoint \\
         checkpoints/volsmpl_b8q/ckpt-00050000/model --bodies 16
 
 `volsmpl.volume.code_refinement.refinement_points` gives each part 2n points (n tight-face samples at +t and -t;
