@@ -27,6 +27,8 @@ The options:
   --quiet                    no progress bars (they show only on a terminal anyway: none in a log file)
   --refine-steps R           refine the learned kinds' part codes by R optimiser steps at every encoding (0: none)
   --refine-warm              with R >= 1: carry each body's refinement from one iteration of the fit to the next
+  --pass-every N             a VolumetricSMPL with learned code-refinement passes runs them at every N-th iteration
+                             of a fit and carries their correction between (1: at every encoding)
 
 The envelope: {app, config, summary, paper, cases: {kind: [records]}, figures, meta, flagged, warnings} and, after them, what an app
 adds of its own (motion's tuning and paired differences, egohmr's regressor row and batch sizes).
@@ -38,11 +40,13 @@ import os
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["add_common", "check_common", "check_threads", "check_refinement", "code_refinement", "parse_kinds",
-           "checkpoints", "volumes",
+__all__ = ["REFINE_OPTIONS", "add_common", "check_common", "check_threads", "check_refinement", "code_refinement",
+           "parse_kinds", "checkpoints", "volumes",
            "checkpoint_names", "CaseRecords", "envelope", "flag_cases", "print_flagged", "case_records",
            "write_results"]
 
+#: the argparse dests of the code-refinement options (every app's modes that encode bodies read all of them)
+REFINE_OPTIONS = frozenset({"refine_steps", "refine_warm", "pass_every"})
 
 
 def add_common(p, *, out: str | None, model: str = "volsmpl,coap,mesh", none: bool = False, render: int = 3,
@@ -75,6 +79,10 @@ def add_common(p, *, out: str | None, model: str = "volsmpl,coap,mesh", none: bo
     p.add_argument("--refine-warm", action="store_true",
                    help="with --refine-steps R: each encoding continues the same bodies' refinement from the "
                         "previous iteration of the fit (volsmpl.volume.warm_codes), R steps per iteration")
+    p.add_argument("--pass-every", type=int, default=1,
+                   help="with a VolumetricSMPL checkpoint that has learned code-refinement passes: run them at every "
+                        "N-th iteration of a fit and add their correction to the encoder's codes of the iterations "
+                        "between (volsmpl.volume.carried_passes; default 1: at every encoding)")
 
 
 def parse_kinds(text: str, none: bool = False) -> list[str]:
@@ -135,29 +143,45 @@ def check_common(args, none: bool = False) -> tuple[list[str], dict]:
 
 
 def check_refinement(args, models: list[str]) -> None:
-    """`--refine-steps R` (an integer >= 0) and `--refine-warm` (needs R >= 1) for a run with a learned kind."""
+    """`--refine-steps R` (an integer >= 0), `--refine-warm` (needs R >= 1) for a run with a learned kind, and
+    `--pass-every N` (an integer >= 1; above 1 with volsmpl and without --refine-warm). Whether the VolumetricSMPL
+    checkpoint has learned passes is checked where it is loaded (`volumes`)."""
+    from volsmpl.volume.carried_passes import check_pass_interval
+    from volsmpl.volume.code_refinement import check_refine_steps
     from volsmpl.volume.models import model_kind
 
     steps, warm = getattr(args, "refine_steps", 0), getattr(args, "refine_warm", False)
-    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
-        raise ValueError(f"--refine-steps {steps}: give an integer >= 0 (0: the encoder's codes)")
+    every = getattr(args, "pass_every", 1)
+    for flag, value, check in (("--refine-steps", steps, check_refine_steps),
+                               ("--pass-every", every, check_pass_interval)):
+        try:
+            check(value)
+        except ValueError as e:
+            raise ValueError(f"{flag} {value}: {str(e).split(': ', 1)[-1]}") from None
     if warm and steps == 0:
         raise ValueError("--refine-warm carries the code refinement across iterations: give --refine-steps 1 (or more)")
     if steps and not any(m != "none" and model_kind(m).learned for m in models):
         raise ValueError(f"--refine-steps refines the part codes of volsmpl and coap; --model {','.join(models)} has "
                          f"none: add one of them or drop the option")
+    if every > 1 and "volsmpl" not in models:
+        raise ValueError(f"--pass-every {every} sets VolumetricSMPL's learned passes; --model {','.join(models)} does "
+                         f"not run volsmpl: add it or drop the option")
+    if every > 1 and warm:
+        raise ValueError(f"--pass-every {every} carries the learned passes' correction and --refine-warm its own: "
+                         f"use one of them")
 
 
 def code_refinement(args) -> dict:
-    """What results.json records of the code refinement: {'steps': R, 'warm': bool}."""
-    return {"steps": int(getattr(args, "refine_steps", 0)), "warm": bool(getattr(args, "refine_warm", False))}
+    """What results.json records of the code refinement: {'steps': R, 'warm': bool, 'pass_every': N}."""
+    return {"steps": int(getattr(args, "refine_steps", 0)), "warm": bool(getattr(args, "refine_warm", False)),
+            "pass_every": int(getattr(args, "pass_every", 1))}
 
 
 def volumes(body, models: list[str], ckpts: dict, device: str = "cpu", random_init: bool = False,
             encoder_bf16: bool = False, refine: dict | None = None) -> dict:
     """One volume per kind, attached to `body` on `device` (kind 'none': None). random_init: untrained networks;
     encoder_bf16: the learned kinds' part encoder under bfloat16 autocast; refine: `code_refinement(args)`, set on
-    the learned kinds (`Volume.set_code_refinement`)."""
+    the learned kinds (`Volume.set_code_refinement`) and its pass interval on volsmpl (`Volume.set_pass_interval`)."""
     import volsmpl
     from volsmpl.volume.models import model_kind
 
@@ -175,6 +199,8 @@ def volumes(body, models: list[str], ckpts: dict, device: str = "cpu", random_in
             vol.net.encoder_bf16 = encoder_bf16
             if refine:
                 vol.set_code_refinement(refine["steps"], warm=refine["warm"])
+        if m == "volsmpl" and refine and refine.get("pass_every", 1) != 1:
+            vol.set_pass_interval(refine["pass_every"])   # ValueError (one line) for a model without passes
         out[m] = vol.to(device)
     return out
 
@@ -213,6 +239,9 @@ class CaseRecords:
         refine = getattr(volume, "refine_steps", 0)
         if refine:   # the codes depend on it; keys of runs without it stay as they were
             spec = {**spec, "code_refinement": [refine, bool(volume.refine_warm)]}
+        every = getattr(volume, "pass_every", 1)
+        if every != 1:
+            spec = {**spec, "pass_every": every}
         return job_key({**spec, "threads": torch.get_num_threads()}, modules=[] if volume is None else [volume],
                        packages=["volsmpl.apps"])
 

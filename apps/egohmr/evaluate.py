@@ -106,8 +106,8 @@ def draw(net, body, d: dict, volume=None, opts: GuideOptions | None = None, seed
         guide = Guidance(score.gradient, opts.scale, opts.steps, opts.plain_steps, opts.plain_factor,
                          pelvis=score.moves_pelvis)
     bar = lambda steps: progress(steps, desc, quiet=quiet, total=sched.T, unit="step")  # noqa: E731
-    warm = volume.warm_start() if guide is not None and hasattr(volume, "warm_start") else contextlib.nullcontext()
-    with warm:   # a volume set to warm code refinement carries the frames' codes through the denoising steps
+    warm = volume.warm_start() if guide is not None else contextlib.nullcontext()
+    with warm:   # a volume set to carry code corrections carries the frames' through the denoising steps
         x = sample(lambda xt, t: net.denoise(xt, t, cond), (len(cond), POSE_DIM), sched, gen, guide,
                    device=cond.device, bar=bar)
     pelvis = d["pelvis_hat"] if score is None else score.placed()

@@ -8,6 +8,7 @@ every option against the mode it is given to (`check_options`, before any work).
 from __future__ import annotations
 
 from volsmpl.apps.checks import applies, number, warn, read_json
+from volsmpl.apps.table import REFINE_OPTIONS
 
 GUIDES = ("none", "volsmpl", "coap", "mesh")
 PAPER_SCALE = {"volsmpl": 30.0, "coap": 0.4, "mesh": 30.0}
@@ -23,7 +24,7 @@ SUPPORT_DEFAULT = "on"
 
 #: the options that shape the guided sampler (read only where --model has a guide other than 'none')
 GUIDANCE = {"guide_steps", "plain_steps", "plain_factor", "wrt", "joints", "reduce", "encoder_bf16", "pelvis_step",
-            "support", "pelvis_along", "refine_steps", "refine_warm"}
+            "support", "pelvis_along"} | REFINE_OPTIONS
 #: the largest --pelvis-step (metres per guided step): the regressed pelvis is off by 12 cm on average (val split)
 MAX_PELVIS_STEP = 0.1
 SUPPORT = ("on", "off")

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from volsmpl.apps.checks import applies, claim_out, number, safe_name, warn
-from volsmpl.apps.table import (CaseRecords, add_common, check_common, check_threads, checkpoint_names,
+from volsmpl.apps.table import (REFINE_OPTIONS, CaseRecords, add_common, check_common, check_threads, checkpoint_names,
                                 code_refinement, envelope, flag_cases, print_flagged, volumes, write_results)
 
 from .console import case_line, format_table
@@ -170,7 +170,7 @@ def _cases(args, split: str, database) -> list:
 
 #: the options each action reads (volsmpl.apps.checks.applies refuses the others)
 _COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device"}
-_REFINE = {"refine_steps", "refine_warm"}
+_REFINE = REFINE_OPTIONS
 _FIT = {"preset", "iters", "lr", "w_keypoints", "w_silhouette", "contact_fraction", "contact_huber", "contact_margin"}
 USES = {"make-db": {"n", "seed", "db", "threads"},
         "run": _COMMON | _FIT | _REFINE | {"resume", "render", "cases", "split", "db", "seed", "batch", "save_meshes"},

@@ -17,7 +17,6 @@
 """
 from __future__ import annotations
 
-import contextlib
 from types import SimpleNamespace
 
 import numpy as np
@@ -119,8 +118,8 @@ class SceneCollision:
 
     def per_frame(self, out, ids: torch.Tensor | None = None) -> torch.Tensor:
         """Summed penetration per body of a body output (R bodies) -> (R,), through the grouped, culled calls.
-        ids: (R,) the bodies' lasting identities (frame rows), which key a volume's warm code refinement
-        (`Volume.warm_keys`); None: 0..R-1."""
+        ids: (R,) the bodies' lasting identities (frame rows), which key the code corrections a volume carries
+        across iterations (`Volume.warm_keys`: warm refinement, learned passes at an interval); None: 0..R-1."""
         kept, need = self._select(out)
         R = len(kept)
         loss = out.vertices.new_zeros(R)
@@ -139,8 +138,7 @@ class SceneCollision:
                 n_points += k
             idx = torch.as_tensor(rows, device=loss.device)
             sub = SimpleNamespace(vertices=out.vertices[idx], joints=out.joints[idx], full_pose=out.full_pose[idx])
-            keys = getattr(self.volume, "warm_keys", None)
-            with keys(idx.cpu() if ids is None else ids[idx.cpu()]) if keys else contextlib.nullcontext():
+            with self.volume.warm_keys(idx.cpu() if ids is None else ids[idx.cpu()]):
                 pen = self.volume.collision_loss(sub, pts, reduction="sum")
             loss = loss.index_copy(0, idx, pen.to(loss.dtype))
         self.last_stats = {"rows": R, "active_rows": sum(len(g) for g in groups.values()), "groups": len(groups),

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 from volsmpl.apps.checks import applies, number, warn
+from volsmpl.apps.table import REFINE_OPTIONS
 
 PAPER_W = {"volsmpl": [1.0], "mesh": [1.0], "coap": [0.01, 0.1, 1.0]}
 ALL_SCENES = 15
@@ -18,7 +19,7 @@ SPARSE_SPACING_M = 0.1   # --spacing above this is warned about (a 20 cm object 
 #: what every mode reads: the models and their cost, the walk's optimisation, the output
 _WALK = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device", "resume", "render", "frames", "iters",
          "lr", "w", "coll_frames", "mem_budget_gb", "residuals", "floor_in_loss", "cost_frames", "cost_repeats",
-         "published_cost", "encoder_bf16", "save_meshes", "refine_steps", "refine_warm"}
+         "published_cost", "encoder_bf16", "save_meshes"} | REFINE_OPTIONS
 _ROOMS = _WALK | {"scenes", "sequences", "seed", "batch"}
 #: mode -> the options (argparse dests) it reads
 USES = {"motion without --scene": _ROOMS,

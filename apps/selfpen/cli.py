@@ -24,8 +24,8 @@ import torch
 
 from volsmpl.apps.checks import applies, claim_out, number, safe_name
 from volsmpl.apps.progress import progress, steps_bar
-from volsmpl.apps.table import (add_common, check_common, checkpoint_names, code_refinement, CaseRecords, envelope,
-                                flag_cases, print_flagged, volumes, write_results)
+from volsmpl.apps.table import (REFINE_OPTIONS, add_common, check_common, checkpoint_names, code_refinement,
+                                CaseRecords, envelope, flag_cases, print_flagged, volumes, write_results)
 
 from .bodies import take_away, writes_meshes
 from .cases import CASES_FILE, load_cases
@@ -104,7 +104,7 @@ def _case_names(text: str) -> list[str] | None:
 _COMMON = {"model", "checkpoint_volsmpl", "checkpoint_coap", "threads", "out", "device", "cases", "case_file"}
 USES = {"run": _COMMON | {"resume", "render", "save_meshes", "random_init", "preset", "lr", "max_iters", "w_selfpen",
                           "w_prior", "limits", "hold", "n_points", "stop_checks", "tau", "patience", "stall_rtol", "max_step", "code_grad",
-                          "sampler_seed", "refine_steps", "refine_warm"},
+                          "sampler_seed"} | REFINE_OPTIONS,
         "tune": _COMMON | {"max_iters", "stop_checks", "tau", "patience", "grid_lr", "grid_w_selfpen", "grid_w_prior",
                            "combine"}}
 

@@ -162,8 +162,9 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
         optimizer: 'adam', 'adamw', 'sgd' or a factory(param_groups, lr) -> torch.optim.Optimizer.
         lr: learning rate; schedule: iteration -> multiplier of every group's lr (torch LambdaLR).
         max_iters: update cap (a MaxIters rule appended unless `stops` holds one); stops: StopRule list.
-        frozen: modules whose parameters get no gradient during the run (restored after); a volume set to warm
-            code refinement (`Volume.set_code_refinement(steps, warm=True)`) opens one `warm_start` for the run.
+        frozen: modules whose parameters get no gradient during the run (restored after); a volume among them opens
+            one `warm_start` for the run, in which it carries its bodies' code corrections from one iteration to
+            the next where it is set to (`Volume.set_code_refinement(steps, warm=True)`, `set_pass_interval(N)`).
         device: where time and memory are measured (default: the first variable's device).
         progress: tqdm bar (None: only on a terminal and for runs of 50 iterations or more).
         usable: variables {name: (B, ...)} -> (B,) bool, the problems whose values the next evaluation can take
@@ -216,7 +217,7 @@ def optimize(variables: dict, terms: dict, *, prepare: Callable | None = None, o
         for p, _ in flags:
             p.requires_grad_(False)
         with contextlib.ExitStack() as warm, Meter(dev) as meter:
-            for m in frozen:   # volumes set to warm code refinement carry their codes through this run
+            for m in frozen:   # volumes set to carry code corrections (warm refinement, passes at an interval)
                 if hasattr(m, "warm_start"):
                     warm.enter_context(m.warm_start())
             for it in range(cap + 1):

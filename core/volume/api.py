@@ -8,6 +8,8 @@ Subclasses: `Volume` (the learned kinds 'volsmpl' and 'coap') and `MeshVolume` (
 """
 from __future__ import annotations
 
+import contextlib
+
 import torch
 
 from volsmpl.volume.collision import reduce_penetration
@@ -62,6 +64,24 @@ class BodyVolume(torch.nn.Module):
         (ValueError, one line)."""
         raise ValueError(f"the {self.kind} volume has no part codes, so code refinement ({steps!r} steps) does not "
                          f"apply; drop the setting for it.")
+
+    def set_pass_interval(self, every: int) -> "BodyVolume":
+        """Set the interval of the learned code-refinement passes; kinds without them (the exact mesh) refuse an
+        interval above 1 (ValueError, one line)."""
+        if every != 1:
+            raise ValueError(f"the {self.kind} volume has no learned code-refinement passes, so an interval "
+                             f"({every!r}) does not apply; drop the setting for it.")
+        return self
+
+    @contextlib.contextmanager
+    def warm_start(self):
+        """One optimisation's scope of code corrections carried from one encoding to the next; kinds without part
+        codes carry nothing (yields None). Every optimisation may open one, whatever the kind."""
+        yield None
+
+    def warm_keys(self, ids):
+        """Inside `warm_start`: which bodies the next encodings hold; kinds without part codes ignore it."""
+        return contextlib.nullcontext()
 
     @property
     def num_parts(self) -> int:

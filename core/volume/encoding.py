@@ -59,8 +59,9 @@ class Encoding:
 
 
 class EncodingCache:
-    """The encoding cache of a Volume: needs the Volume's `net`, `refine_steps`, `refine_warm`, `warm`, `warm_serial`, `_encode`, `_frames`, `_replays`, `_lean_chunks`,
-    `num_parts`, `_last` (the last constant encoding, None at first) and `training`."""
+    """The encoding cache of a Volume: needs the Volume's `net`, `refine_steps`, `refine_warm`, `warm`,
+    `pass_every`, `carried`, `warm_serial`, `_encode`, `_frames`, `_replays`, `_lean_chunks`, `num_parts`, `_last`
+    (the last constant encoding, None at first) and `training`."""
 
     def encode(self, out, generator: torch.Generator | None = None, fresh: bool = False) -> Encoding:
         """Encode a body output (B bodies); cached on the output and reused while the values of its tensors
@@ -89,11 +90,13 @@ class EncodingCache:
         """What a cached encoding must match to be reused: content fingerprints of the output's vertices, joints
         and full_pose and of every weight and buffer of the volume (volsmpl.volume.fingerprint; ~1 ms for the
         3.6 M weights on one CPU thread), in one fingerprint: one read of device values (on a GPU, one wait); and
-        the network's encoder arithmetic (`net.encoder_bf16`) and the code refinement's steps (`refine_steps`),
-        warm mode and warm scope (`refine_warm`, `warm_serial`), which change the codes without changing a tensor."""
+        the network's encoder arithmetic (`net.encoder_bf16`), the code refinement's steps (`refine_steps`), warm
+        mode and warm scope (`refine_warm`, `warm_serial`) and the learned passes' interval (`pass_every`) and its
+        scope, which change the codes without changing a tensor."""
         return fingerprint((out.vertices, out.joints, out.full_pose, *self.parameters(), *self.buffers())) + (
             ("encoder_bf16", bool(self.net.encoder_bf16)), ("refine_steps", int(self.refine_steps)),
-            ("refine_warm", bool(self.refine_warm), self.warm_serial if self.warm is not None else -1))
+            ("refine_warm", bool(self.refine_warm), self.warm_serial if self.warm is not None else -1),
+            ("pass_every", int(self.pass_every), self.warm_serial if self.carried is not None else -1))
 
     def _store(self, out, enc: Encoding, key: tuple) -> None:
         """Cache `enc` on the output (and, for a constant output, as the last encoding for value reuse)."""

@@ -18,6 +18,8 @@ min over parts; points in no box get the analytic box SDF (paper eq. 4).
 """
 from __future__ import annotations
 
+import functools
+
 import torch
 from torch.profiler import record_function
 
@@ -25,6 +27,7 @@ from volsmpl.geometry.boxes import inside_boxes, near_boxes, part_normalization
 from volsmpl.volume.code_refinement import refine_codes, refinement_points
 from volsmpl.volume.refinement_setting import CodeRefinementSetting
 from volsmpl.volume.warm_codes import WarmCodes
+from volsmpl.volume.carried_passes import CarriedPasses
 from volsmpl.volume.collision import reduce_penetration
 from volsmpl.volume.engine.encode_graph import EncodeGraphs
 from volsmpl.volume.encoding import Encoding, EncodingCache
@@ -127,7 +130,9 @@ class Volume(EncodingCache, CodeRefinementSetting, LeanQuery, BodyVolume):
         self.set_precision(precision)
         self.refine_steps = 0   # set_code_refinement
         self.refine_warm = False
-        self.warm: WarmCodes | None = None   # the open warm_start's state
+        self.warm: WarmCodes | None = None   # the open warm_start's state of warm code refinement
+        self.pass_every = 1     # set_pass_interval
+        self.carried: CarriedPasses | None = None   # the open warm_start's state of carried learned passes
         self.warm_serial = 0                 # warm_start scopes opened so far (part of the cache key)
         self.cuda_graphs = bool(cuda_graphs)
         self.encode_graphs = EncodeGraphs()  # the captured encodes (used when cuda_graphs is on)
@@ -157,8 +162,8 @@ class Volume(EncodingCache, CodeRefinementSetting, LeanQuery, BodyVolume):
 
     def _replays(self, out) -> bool:
         """Whether the encode of `out` (with the fixed surface samples) is a CUDA-graph replay: cuda_graphs on, a
-        CUDA output, autograd off (EncodeGraphs.supports), no code refinement (fitted or learned); a key whose capture failed is then
-        encoded eagerly."""
+        CUDA output, autograd off (EncodeGraphs.supports), no code refinement (fitted or learned); a key whose
+        capture failed is then encoded eagerly."""
         return (self.cuda_graphs and not self.refine_steps and self.net.refiner is None
                 and self.encode_graphs.supports(out))
 
@@ -187,14 +192,17 @@ class Volume(EncodingCache, CodeRefinementSetting, LeanQuery, BodyVolume):
             with torch.set_grad_enabled(code_grad and torch.is_grad_enabled()):
                 z = self.net.encode_z(local, parts, draws=p.draws)
                 fit = bool(self.refine_steps) and generator is None and not self.training
-                if self.net.refiner is not None or fit:
-                    xin, target, sc = refinement_points(p, v, Gs, cs, ss, parts)
-                    if self.net.refiner is not None:   # the learned passes, also in training
-                        z = self.net.refiner(self.net, z, xin, target, sc, parts)
-                    if fit and self.warm is not None:
-                        z = self.warm.refine(self.net, z, xin, target, sc, parts)
-                    elif fit:
-                        z = refine_codes(self.net, z, xin, target, sc, parts, self.refine_steps)
+                # the refinement points, made once and only where a pass or step needs them
+                points = functools.cache(lambda: refinement_points(p, v, Gs, cs, ss, parts))
+                if self.net.refiner is not None:   # the learned passes, also in training
+                    if self.carried is not None and generator is None and not self.training:
+                        z = self.carried.apply(self.net, z, points, parts)
+                    else:
+                        z = self.net.refiner(self.net, z, *points(), parts)
+                if fit and self.warm is not None:
+                    z = self.warm.refine(self.net, z, *points(), parts)
+                elif fit:
+                    z = refine_codes(self.net, z, *points(), parts, self.refine_steps)
                 code = self.net.code_from_z(z, parts)
         return Encoding(G=G, box_min=box_min, box_max=box_max, code=code, center=center,
                         scale=scale, parts=parts, slot=slot)

@@ -1,15 +1,18 @@
 """A learned volume's code refinement setting (`Volume` inherits it): cold refinement of every fresh encoding, or
-refinement carried from one encoding to the next inside an optimisation's `warm_start()` scope.
+refinement carried from one encoding to the next inside an optimisation's `warm_start()` scope; and for a model
+with learned passes, the interval at which they run inside such a scope.
 
     vol.set_code_refinement(40)                     # every fresh encoding: 40 steps from the encoder's codes
     vol.set_code_refinement(1, warm=True)
     with vol.warm_start() as warm:                  # the optimisation harness opens one per run
         with vol.warm_keys(rows): ...               # the next encodings hold the bodies `rows`
+    vol.set_pass_interval(4)                        # inside warm_start: the learned passes at every 4th encoding
 """
 from __future__ import annotations
 
 import contextlib
 
+from volsmpl.volume.carried_passes import CarriedPasses, check_pass_interval
 from volsmpl.volume.code_refinement import check_refine_steps
 from volsmpl.volume.warm_codes import WarmCodes
 
@@ -17,9 +20,10 @@ __all__ = ["CodeRefinementSetting"]
 
 
 class CodeRefinementSetting:
-    """The setting's methods; needs the volume's `num_parts` and the attributes `refine_steps`, `refine_warm`,
-    `warm` (the open scope's WarmCodes, else None) and `warm_serial` (scopes opened so far: part of the encoding
-    cache's key), set by the volume's constructor."""
+    """The setting's methods; needs the volume's `num_parts`, `net` and the attributes `refine_steps`,
+    `refine_warm`, `warm` (the open scope's WarmCodes, else None), `pass_every`, `carried` (the open scope's
+    CarriedPasses, else None) and `warm_serial` (scopes opened so far: part of the encoding cache's key), set by the
+    volume's constructor."""
 
     def set_code_refinement(self, steps: int, warm: bool = False):
         """Refine each fresh encoding's part codes by `steps` Adam steps on the posed mesh's own surface
@@ -32,28 +36,53 @@ class CodeRefinementSetting:
         steps = check_refine_steps(steps)
         if warm and steps == 0:
             raise ValueError("warm code refinement needs steps >= 1 per encoding (e.g. --refine-steps 1)")
+        if warm and self.pass_every > 1:
+            raise ValueError(f"warm code refinement carries its own correction: set the learned passes' interval "
+                             f"({self.pass_every}) back to 1 first (--pass-every 1)")
         self.refine_steps, self.refine_warm = steps, bool(warm)
+        return self
+
+    def set_pass_interval(self, every: int):
+        """Inside `warm_start()`, run the network's learned code-refinement passes at every `every`-th encoding
+        of a body only, and add the correction they made to the encoder's codes of the encodings between
+        (volsmpl.volume.carried_passes); 1, the default: the passes at every encoding. Outside a scope, and in
+        training, every encoding runs the passes. Returns self. ValueError (one line) for an interval that is not
+        an integer >= 1, above 1 on a network without learned passes, or with warm code refinement."""
+        every = check_pass_interval(every)
+        if every > 1 and self.net.refiner is None:
+            raise ValueError(f"--pass-every {every}: this model has no learned code-refinement passes "
+                             f"(refiner_iters 0); give a checkpoint with them (e.g. checkpoints/volsmpl_r3/"
+                             f"ckpt-00057000/model) or --pass-every 1")
+        if every > 1 and self.refine_warm:
+            raise ValueError(f"--pass-every {every} carries the learned passes' correction, and warm code refinement "
+                             f"carries its own: use one of them")
+        self.pass_every = every
         return self
 
     @contextlib.contextmanager
     def warm_start(self):
-        """One optimisation's scope of warm code refinement (`set_code_refinement(steps, warm=True)`): the
-        encodings inside carry their bodies' code corrections from one to the next; yields the WarmCodes state
-        (its counters), or None where the volume is not set to warm refinement. Encodings cached outside the
-        scope are not reused inside it, nor the scope's outside."""
-        if not (self.refine_warm and self.refine_steps):
+        """One optimisation's scope of warm code refinement (`set_code_refinement(steps, warm=True)`) or of
+        learned passes at an interval (`set_pass_interval(N)`, N > 1): the encodings inside carry their bodies'
+        code corrections from one to the next; yields the WarmCodes or CarriedPasses state (its counters), or None
+        where the volume is set to neither. Encodings cached outside the scope are not reused inside it, nor the
+        scope's outside."""
+        warm = bool(self.refine_warm and self.refine_steps)
+        carry = self.pass_every > 1 and self.net.refiner is not None
+        if not (warm or carry):
             yield None
             return
-        before = self.warm
+        before = self.warm, self.carried
         self.warm_serial += 1
-        self.warm = WarmCodes(self.num_parts, self.refine_steps)
+        self.warm = WarmCodes(self.num_parts, self.refine_steps) if warm else None
+        self.carried = CarriedPasses(self.num_parts, self.pass_every) if carry else None
         try:
-            yield self.warm
+            yield self.warm if warm else self.carried
         finally:
-            self.warm = before
+            self.warm, self.carried = before
             self.warm_serial += 1   # the scope's encodings are not served after it
 
     def warm_keys(self, ids):
         """Inside `warm_start`: the encodings inside this context hold the bodies `ids` ((B,) distinct ints,
-        WarmCodes.keys); elsewhere nothing."""
-        return contextlib.nullcontext() if self.warm is None else self.warm.keys(ids)
+        KeyedPartState.keys); elsewhere nothing."""
+        state = self.warm if self.warm is not None else self.carried
+        return contextlib.nullcontext() if state is None else state.keys(ids)

@@ -7,16 +7,14 @@ the encoder's code it was made from. The next encoding of that (key, part) start
 moments and takes `steps` Adam steps at the step size `lr` on the part's refinement loss (the points, loss and
 update of `volsmpl.volume.code_refinement`), rising linearly over the first `warmup` steps of each (body, part):
 Adam's first steps move every coordinate by about the full step size whatever its gradient, which from the encoder's
-codes makes them worse (one such step: 91.36 -> 85.79 mean IoU on 16 validation bodies). After T iterations a body that moved little has had T * steps
-steps of refinement at the cost of `steps` per encoding.
+codes makes them worse (one such step: 91.36 -> 85.79 mean IoU on 16 validation bodies). After T iterations a body
+that moved little has had T * steps steps of refinement at the cost of `steps` per encoding.
 
 A (key, part) whose encoder code moved by more than `max_change` of its norm since the last encoding starts
 afresh (delta and moments zero): its body jumped, and the old correction was made for another shape.
 
-Keys: the B bodies of an encoding are keyed 0..B-1, which is right when every encoding holds the same batch of
-problems in the same order (the harness's apps). A caller that encodes other groupings names its bodies with
-`keys(ids)` around the calls that encode them (motion: frame rows). The codes alone cannot tell bodies apart: two
-bodies' codes can be closer than one body's codes after one optimisation step (docs/code_refinement.md).
+Keys: the bodies of an encoding are keyed as `volsmpl.volume.keyed_state.KeyedPartState` says (0..B-1, or the
+ids given by `keys(ids)`).
 
 Autograd: as in `refine_codes`, the returned code is z + delta with delta a constant.
 
@@ -26,11 +24,10 @@ Autograd: as in `refine_codes`, the returned code is z + delta with delta a cons
 """
 from __future__ import annotations
 
-import contextlib
-
 import torch
 
 from volsmpl.volume.code_refinement import REFINE_LR, REFINE_WARMUP, adam_steps, check_refine_steps
+from volsmpl.volume.keyed_state import KeyedPartState, code_change
 
 __all__ = ["WarmCodes", "WARM_MAX_CHANGE"]
 
@@ -41,7 +38,7 @@ WARM_MAX_CHANGE = 0.05
 WARM_WARMUP = REFINE_WARMUP
 
 
-class WarmCodes:
+class WarmCodes(KeyedPartState):
     """Per-(body key, part) code corrections and Adam state carried across encodings (module docstring).
 
     Args:
@@ -54,6 +51,8 @@ class WarmCodes:
     `known`: the body keys seen.
     """
 
+    FIELDS = {"delta": ("L",), "m1": ("L",), "m2": ("L",), "t": (1,)}
+
     def __init__(self, num_parts: int, steps: int = 1, lr: float = REFINE_LR, max_change: float = WARM_MAX_CHANGE,
                  warmup: int = WARM_WARMUP):
         if check_refine_steps(steps) < 1:
@@ -62,51 +61,10 @@ class WarmCodes:
             raise ValueError(f"max_change must be > 0 (a relative code change), got {max_change}")
         if not isinstance(warmup, int) or warmup < 0:
             raise ValueError(f"warmup must be an integer >= 0 (steps), got {warmup!r}")
-        self.num_parts, self.steps, self.lr, self.max_change = int(num_parts), steps, float(lr), float(max_change)
+        super().__init__(num_parts)
+        self.steps, self.lr, self.max_change = steps, float(lr), float(max_change)
         self.warmup = warmup
-        self._ids: torch.Tensor | None = None
-        self._rows: dict[int, int] = {}
-        self._state: dict[str, torch.Tensor] = {}
         self.encoded = self.restarted = 0
-
-    @property
-    def known(self) -> list[int]:
-        """The body keys seen so far, in the order first seen."""
-        return list(self._rows)
-
-    @contextlib.contextmanager
-    def keys(self, ids):
-        """The encodings inside hold the bodies `ids` ((B,) distinct ints, in the output's order)."""
-        ids = torch.as_tensor(ids).reshape(-1)
-        if ids.is_floating_point() or len(torch.unique(ids)) != len(ids):
-            raise ValueError("WarmCodes.keys: give distinct integer ids, one per body of the encoded output")
-        before, self._ids = self._ids, ids.cpu()
-        try:
-            yield self
-        finally:
-            self._ids = before
-
-    def _rows_of(self, B: int, like: torch.Tensor) -> torch.Tensor:
-        """The state rows of the next encoding's B bodies (new keys get new rows)."""
-        ids = torch.arange(B) if self._ids is None else self._ids
-        if len(ids) != B:
-            raise ValueError(f"WarmCodes.keys named {len(ids)} bodies but the encoded output has {B}")
-        s = self._state
-        if s and (s["delta"].device != like.device or s["delta"].dtype != like.dtype
-                  or s["delta"].shape[-1] != like.shape[-1]):
-            self._rows, self._state, s = {}, {}, {}   # another device, precision or network: start afresh
-        new = [int(i) for i in ids.tolist() if int(i) not in self._rows]
-        if new:
-            K, L = self.num_parts, like.shape[-1]
-            for i in new:
-                self._rows[i] = len(self._rows)
-            grow = {"delta": (L,), "m1": (L,), "m2": (L,), "zref": (L,), "t": (1,)}
-            for name, tail in grow.items():
-                pad = like.new_zeros(len(new), K, *tail)
-                s[name] = pad if name not in s else torch.cat([s[name], pad])
-            have = torch.zeros(len(new), K, dtype=torch.bool, device=like.device)
-            s["have"] = have if "have" not in s else torch.cat([s["have"], have])
-        return torch.tensor([self._rows[int(i)] for i in ids.tolist()], device=like.device)
 
     def refine(self, net, z: torch.Tensor, xin: torch.Tensor, target: torch.Tensor, scale, parts) -> torch.Tensor:
         """z + delta after `steps` Adam steps from each (body, part)'s carried correction and moments, the state
@@ -119,13 +77,12 @@ class WarmCodes:
         if Kc == 0:
             return z
         zd = z.detach()
-        rows = self._rows_of(B, zd)[:, None]
+        rows = self.rows_of(B, zd)[:, None]
         kk = (torch.arange(self.num_parts, device=zd.device) if parts is None else parts.to(zd.device))[None]
-        s = self._state
+        s = self.state
         delta, m1, m2, t = (s[n][rows, kk].clone() for n in ("delta", "m1", "m2", "t"))
         had, zref = s["have"][rows, kk], s["zref"][rows, kk]
-        change = (zd - zref).norm(dim=-1) / zref.norm(dim=-1).clamp_min(torch.finfo(zd.dtype).tiny)
-        restart = had & (change > self.max_change)
+        restart = had & (code_change(zd, zref) > self.max_change)
         fresh = (~had | restart)[..., None]
         delta, m1, m2, t = (x.masked_fill(fresh, 0) for x in (delta, m1, m2, t))
         var = adam_steps(net, zd + delta, xin, target, scale, parts, self.steps, m1, m2, t, self.lr, cosine=False,

@@ -2,6 +2,7 @@
 
     python docs/scripts/warm_refinement.py --checkpoint CK [--bodies 16] [--iters 100] [--steps 1] [--lr 1e-2]
         [--jitter 0.3] [--schedule constant|cosine] [--carry delta|code] [--threads 1] [--out F.json]
+    python docs/scripts/warm_refinement.py --checkpoint CK --pass-every 1 2 4 [--path cubic|linear] ...
 
 An app re-encodes its bodies at every optimisation step. Warm-started refinement keeps each (body, part)'s code
 correction delta from the previous step and adds it to the new encoding, then takes `steps` Adam steps on the
@@ -21,6 +22,12 @@ state must not hand one body's correction to another).
 With the defaults (`--schedule constant --carry delta`) the warm codes are the volume's own
 (`Volume.set_code_refinement(steps, warm=True)` inside `warm_start()`, volsmpl.volume.warm_codes), which drops a
 (body, part)'s correction where its encoder code moved by more than `--max-change` of its norm in one step.
+
+`--pass-every N` (a checkpoint with learned passes, `refiner_iters` >= 1): the volume's own carried passes
+(`Volume.set_pass_interval(N)` inside `warm_start()`, volsmpl.volume.carried_passes): the learned passes run at
+encodings 0, N, 2N, ... and where an encoder code jumped by more than 5 % of its norm, and the correction they made is
+added to the encoder's codes of the encodings between. With `--iters` = kN - 1 the scored last encoding is N - 1
+encodings after the last scheduled pass: the stalest correction of the schedule.
 """
 import argparse
 import dataclasses
@@ -96,7 +103,8 @@ def main():
     ap.add_argument("--checkpoint", required=True)
     ap.add_argument("--bodies", type=int, default=16)
     ap.add_argument("--iters", type=int, default=100)
-    ap.add_argument("--steps", type=int, nargs="+", default=[1])
+    ap.add_argument("--steps", type=int, nargs="+", default=None,
+                    help="warm Adam steps per encoding, one row each (default 1; none with --pass-every)")
     ap.add_argument("--lr", type=float, default=1e-2)
     ap.add_argument("--jitter", type=float, default=0.3)
     ap.add_argument("--schedule", default="constant", choices=["constant", "cosine"])
@@ -104,9 +112,14 @@ def main():
     ap.add_argument("--max-change", type=float, default=WARM_MAX_CHANGE,
                     help="the volume's restart threshold (inf: never restart)")
     ap.add_argument("--warmup", type=int, default=WARM_WARMUP, help="the volume's step-size warm-up (0: none)")
+    ap.add_argument("--path", default="cubic", choices=["cubic", "linear"])
+    ap.add_argument("--pass-every", type=int, nargs="+", default=[],
+                    help="rows with the learned passes at every N-th encoding, their correction carried between")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
+    if a.steps is None:
+        a.steps = [] if a.pass_every else [1]
     torch.set_num_threads(a.threads)
     body = create_body()
     vol = attach_volume(body, checkpoint=a.checkpoint)
@@ -117,6 +130,9 @@ def main():
     start = bodies["body_pose"] + torch.randn(bodies["body_pose"].shape, generator=g, dtype=torch.float64).to(
         bodies["body_pose"].dtype) * a.jitter
     rows = []
+
+    def path(i):
+        return i / a.iters if a.path == "linear" else 1 - (1 - i / a.iters) ** 3
 
     def encoder_only(out, pts):
         return vol.query(out, pts)
@@ -144,7 +160,7 @@ def main():
                 state = scope.__enter__()
                 state.lr, state.max_change, state.warmup = a.lr, a.max_change, a.warmup
             for i in range(a.iters + 1):
-                u = 1 - (1 - i / a.iters) ** 3
+                u = path(i)
                 pose = start + (bodies["body_pose"] - start) * u
                 with torch.no_grad():
                     out = body(**{**bodies, "body_pose": pose})
@@ -175,6 +191,33 @@ def main():
                      "code_change_per_step": quantiles(torch.cat(drift["per_step"])),
                      "code_distance_to_other_bodies": quantiles(drift["between"]),
                      "restarted_share": drift.get("restarted")})
+        print(json.dumps(rows[-1]), flush=True)
+    if a.pass_every and net.refiner is None:
+        raise SystemExit(f"--pass-every needs a checkpoint with learned passes; {a.checkpoint} has none")
+    for every in a.pass_every:
+        t0 = time.perf_counter()
+        counts = {}
+
+        def carried_predict(out_end, pts, every=every, counts=counts):
+            vol.set_pass_interval(every)
+            try:
+                with vol.warm_start() as carried:
+                    for i in range(a.iters + 1):
+                        pose = start + (bodies["body_pose"] - start) * path(i)
+                        with torch.no_grad():
+                            enc = vol.encode(body(**{**bodies, "body_pose": pose}), fresh=True)
+            finally:
+                vol.set_pass_interval(1)
+            counts.update(passed=carried.passed // carried.num_parts, restarted=carried.restarted,
+                          encoded=carried.encoded // carried.num_parts)
+            return vol.query_encoded(enc, pts)
+
+        with torch.no_grad():
+            res = evaluate(carried_predict, bodies=bodies, body=body, config=cfg, name=f"every{every}")
+        rows.append({"codes": f"learned passes at every {every}. encoding, correction carried", "pass_every": every,
+                     "seconds": round(time.perf_counter() - t0, 1), "iou": iou_row(res),
+                     "encodings": counts["encoded"], "encodings_with_passes": counts["passed"],
+                     "restarts": counts["restarted"]})
         print(json.dumps(rows[-1]), flush=True)
     if a.out:
         with open(a.out, "w") as fh:

@@ -3,12 +3,17 @@ app, set on the learned kinds' volumes, recorded in results.json and in the case
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
 from volsmpl.apps.table import CaseRecords, volumes
 from volsmpl.body.model import create_body
 from volsmpl.cli import main as cli_main
+
+ROOT = Path(__file__).resolve().parents[2]
+R3 = str(ROOT / "checkpoints" / "volsmpl_r3" / "ckpt-00057000" / "model")
+SHIPPED = str(ROOT / "core" / "assets" / "volsmpl_anny")
 
 
 @pytest.mark.parametrize("argv, words", [
@@ -20,6 +25,14 @@ from volsmpl.cli import main as cli_main
     (["hoi", "tune", "--refine-steps", "1"], ["--refine-steps", "does not apply to `volsmpl hoi tune`"]),
     (["motion", "--model", "mesh", "--refine-steps", "1", "--refine-warm"], ["--refine-steps refines", "--model mesh"]),
     (["egohmr", "sample", "--model", "none", "--refine-steps", "1"], ["--refine-steps", "no guide"]),
+    (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--pass-every", "0"],
+     ["--pass-every 0", "integer >= 1"]),
+    (["motion", "--model", "mesh", "--pass-every", "2"], ["--pass-every 2 sets VolumetricSMPL's", "--model mesh"]),
+    (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--pass-every", "2", "--refine-steps", "1",
+      "--refine-warm"], ["--pass-every 2", "--refine-warm", "use one of them"]),
+    (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--pass-every", "2",
+      "--checkpoint-volsmpl", SHIPPED], ["--pass-every 2", "no learned code-refinement passes"]),
+    (["hoi", "tune", "--pass-every", "2"], ["--pass-every", "does not apply to `volsmpl hoi tune`"]),
 ])
 def test_refinement_options_are_checked_before_any_work(argv, words, tmp_path, capsys):
     assert cli_main(argv + ["--out", str(tmp_path / "o")]) == 2
@@ -42,6 +55,11 @@ def test_volumes_get_the_setting_and_case_keys_hold_it(tmp_path):
     plain.set_code_refinement(2)
     keys.add(store.key({"case": "a"}, plain))
     assert len(keys) == 3                                  # none, warm and cold refinement make different records
+    every = volumes(body, ["volsmpl", "coap"], {"volsmpl": R3, "coap": None}, refine={"steps": 0, "warm": False,
+                                                                                    "pass_every": 4})
+    assert every["volsmpl"].pass_every == 4 and every["coap"].pass_every == 1
+    once = volumes(body, ["volsmpl"], {"volsmpl": R3})["volsmpl"]
+    assert store.key({"case": "a"}, every["volsmpl"]) != store.key({"case": "a"}, once)
 
 
 def test_a_warm_run_records_its_setting(tmp_path):
@@ -50,6 +68,15 @@ def test_a_warm_run_records_its_setting(tmp_path):
                    "--out", str(tmp_path)])
     assert rc == 0
     res = json.loads((tmp_path / "results.json").read_text())
-    assert res["config"]["code_refinement"] == {"steps": 1, "warm": True}
+    assert res["config"]["code_refinement"] == {"steps": 1, "warm": True, "pass_every": 1}
     (case,) = res["cases"]["volsmpl"]
     assert case["name"] == "arm_through_head" and len(case["body_pose"]) == 69
+
+
+def test_a_run_with_passes_at_an_interval_records_it(tmp_path):
+    rc = cli_main(["selfpen", "--model", "volsmpl", "--cases", "arm_through_head", "--max-iters", "3",
+                   "--n-points", "32", "--threads", "1", "--render", "0", "--checkpoint-volsmpl", R3,
+                   "--pass-every", "2", "--out", str(tmp_path)])
+    assert rc == 0
+    res = json.loads((tmp_path / "results.json").read_text())
+    assert res["config"]["code_refinement"] == {"steps": 0, "warm": False, "pass_every": 2}

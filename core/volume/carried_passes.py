@@ -1,0 +1,94 @@
+"""Learned code-refinement passes at every N-th encoding of an optimisation, their correction carried between:
+`Volume.set_pass_interval(N)`.
+
+A model with learned passes (`VolumeConfig.refiner_iters`, volsmpl.nn.code_refiner) corrects the encoder's codes
+at every encoding; an app that re-encodes its bodies at every iteration pays for the passes at every iteration.
+From one iteration to the next a body moves little, and so does the correction the passes make. `CarriedPasses`
+keeps, per (body key, part), the correction delta = passes' code - encoder's code of the last encoding that ran
+the passes, and adds it to the encoder's codes of the encodings between. The passes run again for a body of an encoding, on all
+its encoded parts, whose state they renew, when
+
+- a part of it has none yet (a new body key, or a part not encoded before),
+- the last pass of a part of it is N - 1 encodings old (so they run at every N-th encoding), or
+- a part's encoder code moved by more than `max_change` of its norm since that pass (the body jumped). Measured on the validation bodies moving
+along a path (docs/scripts/warm_refinement.py --pass-every, docs/learned_refinement.md): the carried correction
+scores as the passes at every encoding where a body moves little per iteration, and loses 0.12 mean IoU points
+where it moves 1/20 of a 0.3 rad pose change per iteration and the correction is 3 iterations old.
+
+Keys: as `volsmpl.volume.keyed_state.KeyedPartState` says (0..B-1, or the ids given by `keys(ids)`).
+
+Autograd: the returned code is z + delta with delta a constant, also at the encodings that run the passes: the
+gradient reaches the body through the encoder, not through the passes (which run without autograd here).
+
+    carried = CarriedPasses(num_parts=16, every=4)
+    z = carried.apply(net, z, points, parts)     # z (B, K', latent); points() -> (xin, target, scale)
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import torch
+
+from volsmpl.volume.keyed_state import KeyedPartState, code_change
+from volsmpl.volume.warm_codes import WARM_MAX_CHANGE
+
+__all__ = ["CarriedPasses", "check_pass_interval"]
+
+
+def check_pass_interval(every) -> int:
+    """`every` as an int >= 1 (1: the passes at every encoding), else ValueError (one line)."""
+    if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+        raise ValueError(f"pass interval {every!r}: give an integer >= 1 (1: the learned passes at every encoding)")
+    return every
+
+
+class CarriedPasses(KeyedPartState):
+    """Per-(body key, part) corrections of the learned passes carried across encodings (module docstring).
+
+    Args:
+        num_parts: K, the volume's parts.
+        every: the passes run at every `every`-th encoding (>= 1).
+        max_change: relative encoder-code change since the last pass that runs the passes again (> 0; inf: never).
+    Counters: `encoded` (body, part) codes made so far, `passed` of them by running the passes, `restarted` the
+    bodies whose passes ran because a code jumped; `known`: the body keys seen.
+    """
+
+    FIELDS = {"delta": ("L",), "age": ()}
+
+    def __init__(self, num_parts: int, every: int, max_change: float = WARM_MAX_CHANGE):
+        if not max_change > 0:
+            raise ValueError(f"max_change must be > 0 (a relative code change), got {max_change}")
+        super().__init__(num_parts)
+        self.every, self.max_change = check_pass_interval(every), float(max_change)
+        self.encoded = self.passed = self.restarted = 0
+
+    def apply(self, net, z: torch.Tensor, points: Callable[[], tuple], parts: torch.Tensor | None) -> torch.Tensor:
+        """z + delta, delta each (body, part)'s carried correction, or a new one from the passes (`net.refiner`)
+        when the encoding is due (module docstring); the state updated.
+
+        Shape: z (B, K', latent) encoder codes of `parts` ((K',) ids, None: all K); points() -> the refinement
+        points (xin, target, scale) of `refinement_points`, called only when the passes run -> (B, K', latent).
+        """
+        B, Kc = z.shape[:2]
+        if Kc == 0:
+            return z
+        zd = z.detach()
+        rows = self.rows_of(B, zd)[:, None]
+        kk = (torch.arange(self.num_parts, device=zd.device) if parts is None else parts.to(zd.device))[None]
+        s = self.state
+        had, age, delta = s["have"][rows, kk], s["age"][rows, kk], s["delta"][rows, kk].clone()
+        jumped = (had & (code_change(zd, s["zref"][rows, kk]) > self.max_change)).any(dim=1)
+        due = (~had).any(dim=1) | jumped | (age + 1 >= self.every).any(dim=1)        # (B,) bodies to pass anew
+        self.encoded += B * Kc
+        if bool(due.any()):
+            xin, target, scale = points()
+            with torch.no_grad():
+                delta[due] = net.refiner(net, zd[due], xin[due], target[due], None if scale is None else scale[due],
+                                         parts) - zd[due]
+            r = rows[due]
+            s["delta"][r, kk], s["zref"][r, kk], s["have"][r, kk], s["age"][r, kk] = delta[due], zd[due], True, 0
+            self.passed += int(due.sum()) * Kc
+            self.restarted += int((due & jumped).sum())
+        if not bool(due.all()):
+            s["age"][rows[~due], kk] += 1
+        return z + delta
