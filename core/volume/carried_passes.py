@@ -5,12 +5,15 @@ A model with learned passes (`VolumeConfig.refiner_iters`, volsmpl.nn.code_refin
 at every encoding; an app that re-encodes its bodies at every iteration pays for the passes at every iteration.
 From one iteration to the next a body moves little, and so does the correction the passes make. `CarriedPasses`
 keeps, per (body key, part), the correction delta = passes' code - encoder's code of the last encoding that ran
-the passes, and adds it to the encoder's codes of the encodings between. The passes run again for a body of an encoding, on all
-its encoded parts, whose state they renew, when
+the passes on it, and adds it to the encoder's codes of the encodings between. A (body, part) of an encoding is
+passed anew when
 
-- a part of it has none yet (a new body key, or a part not encoded before),
-- the last pass of a part of it is N - 1 encodings old (so they run at every N-th encoding), or
-- a part's encoder code moved by more than `max_change` of its norm since that pass (the body jumped). Measured on the validation bodies moving
+- it has no correction yet (a new body key, or a part not encoded before),
+- its last pass is N - 1 encodings old (so the passes run at every N-th encoding), or
+- its encoder code moved by more than `max_change` of its norm since that pass (the body jumped there);
+
+the passes then run on the bodies and parts holding such a (body, part) (each pass reads a part of a body alone, so
+the others are not needed), whose corrections they renew. Measured on the validation bodies moving
 along a path (docs/scripts/warm_refinement.py --pass-every, docs/learned_refinement.md): the carried correction
 scores as the passes at every encoding where a body moves little per iteration, and loses 0.12 mean IoU points
 where it moves 1/20 of a 0.3 rad pose change per iteration and the correction is 3 iterations old.
@@ -50,7 +53,7 @@ class CarriedPasses(KeyedPartState):
         every: the passes run at every `every`-th encoding (>= 1).
         max_change: relative encoder-code change since the last pass that runs the passes again (> 0; inf: never).
     Counters: `encoded` (body, part) codes made so far, `passed` of them by running the passes, `restarted` the
-    bodies whose passes ran because a code jumped; `known`: the body keys seen.
+    bodies of encodings where a code of theirs jumped; `known`: the body keys seen.
     """
 
     FIELDS = {"delta": ("L",), "age": ()}
@@ -76,19 +79,22 @@ class CarriedPasses(KeyedPartState):
         rows = self.rows_of(B, zd)[:, None]
         kk = (torch.arange(self.num_parts, device=zd.device) if parts is None else parts.to(zd.device))[None]
         s = self.state
-        had, age, delta = s["have"][rows, kk], s["age"][rows, kk], s["delta"][rows, kk].clone()
-        jumped = (had & (code_change(zd, s["zref"][rows, kk]) > self.max_change)).any(dim=1)
-        due = (~had).any(dim=1) | jumped | (age + 1 >= self.every).any(dim=1)        # (B,) bodies to pass anew
+        had, age, delta = s["have"][rows, kk], s["age"][rows, kk], s["delta"][rows, kk]
+        jumped = had & (code_change(zd, s["zref"][rows, kk]) > self.max_change)
+        due = ~had | jumped | (age + 1 >= self.every)                       # (B, K') codes to pass anew
         self.encoded += B * Kc
+        fresh = due.any(dim=1)[:, None] & due.any(dim=0)[None]             # the block of bodies x parts passed
         if bool(due.any()):
             xin, target, scale = points()
+            bi, pi = due.any(dim=1).nonzero()[:, 0], due.any(dim=0).nonzero()[:, 0]
+            sub = (bi[:, None], pi[None])
             with torch.no_grad():
-                delta[due] = net.refiner(net, zd[due], xin[due], target[due], None if scale is None else scale[due],
-                                         parts) - zd[due]
-            r = rows[due]
-            s["delta"][r, kk], s["zref"][r, kk], s["have"][r, kk], s["age"][r, kk] = delta[due], zd[due], True, 0
-            self.passed += int(due.sum()) * Kc
-            self.restarted += int((due & jumped).sum())
-        if not bool(due.all()):
-            s["age"][rows[~due], kk] += 1
+                new = net.refiner(net, zd[sub], xin[sub], target[sub], None if scale is None else scale[sub], kk[0, pi])
+            delta = delta.index_put(sub, new - zd[sub])
+            self.passed += int(fresh.sum())
+            self.restarted += int(jumped.any(dim=1).sum())
+        s["delta"][rows, kk] = delta
+        s["zref"][rows, kk] = torch.where(fresh[..., None], zd, s["zref"][rows, kk])
+        s["have"][rows, kk] = had | fresh
+        s["age"][rows, kk] = torch.where(fresh, 0, age + 1)
         return z + delta

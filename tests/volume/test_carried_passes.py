@@ -75,11 +75,12 @@ def test_the_passes_run_at_every_nth_encoding_and_their_correction_is_carried(se
     assert (fresh - encoder_z(vol, outs[2])).norm() > 20 * (got[2] - fresh).norm() > 0
 
 
-def test_a_jump_runs_the_passes_again(setup):
+def test_a_jump_passes_the_parts_that_jumped_anew(setup):
     body, vol, params = setup
     still, moved = posed(body, params, 0.0), posed(body, params, 0.8)
-    change = (encoder_z(vol, moved) - encoder_z(vol, still)).norm(dim=-1) / encoder_z(vol, still).norm(dim=-1)
-    assert (change > WARM_MAX_CHANGE).any()
+    za, zb = encoder_z(vol, still), encoder_z(vol, moved)
+    jumped = ((zb - za).norm(dim=-1) / za.norm(dim=-1))[0] > WARM_MAX_CHANGE
+    assert jumped.any() and (~jumped).any()                    # the arm's parts jumped, the others did not
     vol.set_pass_interval(10)
     try:
         with torch.no_grad(), vol.warm_start() as carried:
@@ -88,8 +89,10 @@ def test_a_jump_runs_the_passes_again(setup):
             z = passes_z(vol, moved)
     finally:
         vol.set_pass_interval(1)
-    assert carried.restarted == 1 and carried.passed == 2 * vol.num_parts
-    assert torch.allclose(z, passes_z(vol, moved), atol=1e-5, rtol=1e-5)
+    assert carried.restarted == 1 and carried.passed == vol.num_parts + int(jumped.sum())
+    assert torch.allclose(z[:, jumped], passes_z(vol, moved)[:, jumped], atol=1e-4, rtol=1e-4)
+    kept = zb + passes_z(vol, still) - za                      # the still body's correction, carried
+    assert torch.allclose(z[:, ~jumped], kept[:, ~jumped], atol=1e-4, rtol=1e-4)
 
 
 def test_only_the_body_that_jumped_is_passed_anew(setup):
@@ -99,6 +102,9 @@ def test_only_the_body_that_jumped_is_passed_anew(setup):
     pose[1, 45:54] += 0.8                                      # body 1's left arm turned; body 0 stays
     with torch.no_grad():
         before, after = body(**params), body(**{**params, "body_pose": pose})
+    za, zb = encoder_z(vol, before), encoder_z(vol, after)
+    jumped = ((zb - za).norm(dim=-1) / za.norm(dim=-1)) > WARM_MAX_CHANGE          # (2, K)
+    assert not jumped[0].any() and jumped[1].any()
     vol.set_pass_interval(10)
     try:
         with torch.no_grad(), vol.warm_start() as carried:
@@ -107,11 +113,10 @@ def test_only_the_body_that_jumped_is_passed_anew(setup):
     finally:
         vol.set_pass_interval(1)
     K = vol.num_parts
-    assert carried.passed == 3 * K and carried.restarted == 1 and carried.encoded == 4 * K
-    fresh = passes_z(vol, after)
-    assert torch.allclose(z[1], fresh[1], atol=1e-4, rtol=1e-4)
-    carried0 = encoder_z(vol, after)[0] + passes_z(vol, before)[0] - encoder_z(vol, before)[0]
-    assert torch.allclose(z[0], carried0, atol=1e-4, rtol=1e-4)
+    assert carried.passed == 2 * K + int(jumped[1].sum()) and carried.restarted == 1 and carried.encoded == 4 * K
+    fresh, kept = passes_z(vol, after), zb + passes_z(vol, before) - za
+    assert torch.allclose(z[jumped], fresh[jumped], atol=1e-4, rtol=1e-4)
+    assert torch.allclose(z[~jumped], kept[~jumped], atol=1e-4, rtol=1e-4)
 
 
 def test_each_body_key_carries_its_own_correction(setup):
@@ -134,7 +139,7 @@ def test_each_body_key_carries_its_own_correction(setup):
     assert carried.passed == 2 * vol.num_parts and carried.restarted == 0   # the second encoding carried
     ref = passes_z(vol, swapped)
     assert torch.allclose(z, ref, atol=1e-4, rtol=1e-4), (z - ref).abs().max()
-    assert unkeyed.passed == 4 * vol.num_parts and unkeyed.restarted == 2
+    assert unkeyed.passed > 2 * vol.num_parts and unkeyed.restarted == 2
 
 
 def test_a_carried_encoding_takes_the_encoders_gradient_and_makes_no_refinement_points(setup, monkeypatch):
