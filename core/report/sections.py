@@ -152,18 +152,20 @@ def flagged_note(data: dict) -> list[str]:
 
 
 def refinement_note(data: dict) -> list[str]:
-    """How the learned back-ends' part codes were made (results.json `config.code_refinement`: {steps, warm}); nothing
-    for a result made before the apps recorded it."""
+    """How the learned back-ends' part codes were made (results.json `config.code_refinement`: {steps, warm,
+    pass_every}); nothing for a result made before the apps recorded it."""
     r = (data.get("config") or {}).get("code_refinement")
     if not isinstance(r, dict):
         return []
-    steps = r.get("steps") or 0
+    steps, every = r.get("steps") or 0, r.get("pass_every") or 1
+    passes = (f" VolumetricSMPL's learned passes ran at every {fmt(every)}th iteration of a fit, their correction "
+              f"carried between (`--pass-every {fmt(every)}`; docs/learned_refinement.md)." if every > 1 else "")
     if not steps:
-        return ["", "Part codes: the encoder's, one encoding per body and step (no code refinement)."]
+        return ["", "Part codes: the encoder's, one encoding per body and step (no code refinement)." + passes]
     how = ("carried from each iteration to the next (`--refine-warm`)" if r.get("warm")
            else "from the encoder's codes at every encoding")
     return ["", f"Part codes: {fmt(steps)} refinement step{'' if steps == 1 else 's'} per encoding, {how} "
-                f"(`--refine-steps {fmt(steps)}`; docs/code_refinement.md)."]
+                f"(`--refine-steps {fmt(steps)}`; docs/code_refinement.md)." + passes]
 
 
 def _refine_steps(steps) -> str:

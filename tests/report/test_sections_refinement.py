@@ -11,6 +11,9 @@ def test_the_code_refinement_of_a_result_is_named():
     assert "1 refinement step per encoding" in warm and "--refine-warm" in warm
     cold = refinement_note({"config": {"code_refinement": {"steps": 40, "warm": False}}})[-1]
     assert "40 refinement steps per encoding" in cold and "from the encoder's codes" in cold
+    assert "--pass-every" not in cold
+    every = refinement_note({"config": {"code_refinement": {"steps": 0, "warm": False, "pass_every": 4}}})[-1]
+    assert "every 4th iteration" in every and "--pass-every 4" in every
 
 
 def test_an_app_section_carries_it():
