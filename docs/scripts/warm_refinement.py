@@ -26,7 +26,7 @@ With the defaults (`--schedule constant --carry delta`) the warm codes are the v
 `--pass-every N` (a checkpoint with learned passes, `refiner_iters` >= 1): the volume's own carried passes
 (`Volume.set_pass_interval(N)` inside `warm_start()`, volsmpl.volume.carried_passes): the learned passes run at
 encodings 0, N, 2N, ... and where an encoder code jumped by more than 5 % of its norm, and the correction they made is
-added to the encoder's codes of the encodings between. With `--iters` = kN - 1 the scored last encoding is N - 1
+added to the encoder's codes of the encodings between (`--max-change` sets the 5 %). With `--iters` = kN - 1 the scored last encoding is N - 1
 encodings after the last scheduled pass: the stalest correction of the schedule.
 """
 import argparse
@@ -110,7 +110,7 @@ def main():
     ap.add_argument("--schedule", default="constant", choices=["constant", "cosine"])
     ap.add_argument("--carry", default="delta", choices=["delta", "code"])
     ap.add_argument("--max-change", type=float, default=WARM_MAX_CHANGE,
-                    help="the volume's restart threshold (inf: never restart)")
+                    help="the volume's restart threshold, also of --pass-every (inf: never restart)")
     ap.add_argument("--warmup", type=int, default=WARM_WARMUP, help="the volume's step-size warm-up (0: none)")
     ap.add_argument("--path", default="cubic", choices=["cubic", "linear"])
     ap.add_argument("--pass-every", type=int, nargs="+", default=[],
@@ -202,6 +202,7 @@ def main():
             vol.set_pass_interval(every)
             try:
                 with vol.warm_start() as carried:
+                    carried.max_change = a.max_change
                     for i in range(a.iters + 1):
                         pose = start + (bodies["body_pose"] - start) * path(i)
                         with torch.no_grad():
