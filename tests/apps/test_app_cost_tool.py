@@ -45,5 +45,7 @@ def test_unknown_apps_and_settings_are_refused_in_one_line(tmp_path, monkeypatch
         run(monkeypatch, "--apps", "hoii", "--out", str(tmp_path / "x.json"))
     with pytest.raises(SystemExit, match="unknown setting 'r9'"):
         run(monkeypatch, "--settings", "shipped,r9", "--out", str(tmp_path / "x.json"))
-    with pytest.raises(SystemExit, match="must be >= 1"):
+    with pytest.raises(SystemExit, match="--rounds 0: give a number >= 1"):
         run(monkeypatch, "--rounds", "0", "--out", str(tmp_path / "x.json"))
+    with pytest.raises(SystemExit, match="--threads -1: give a number >= 1"):
+        run(monkeypatch, "--threads", "-1", "--out", str(tmp_path / "x.json"))
