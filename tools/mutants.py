@@ -512,7 +512,7 @@ MUTANTS = {
     "refiner_training_moves_every_weight": ("core/train/loop.py", "        volume.net.requires_grad_(False)\n", "",
                                             [T + "nn/test_code_refiner.py::test_training_only_the_refiner_leaves_the_encoder_and_decoders"]),
     "refiner_not_applied": ("core/volume/learned.py",
-                            "z = self.net.refiner(self.net, z, xin, target, sc, parts)", "pass",
+                            "z = self.net.refiner(self.net, z, *points(), parts)", "pass",
                             [T + "nn/test_code_refiner.py::test_refining_some_parts_gives_the_codes_of_refining_all"]),
 }
 
