@@ -238,3 +238,14 @@ def test_the_errors(setup):
         vol.set_code_refinement(0)
     with pytest.raises(ValueError, match="max_change"):
         CarriedPasses(16, every=2, max_change=0)
+
+
+def test_kinds_without_passes_refuse_an_interval_and_open_empty_scopes():
+    body = create_body()
+    mesh, coap = attach_volume(body, model="mesh"), attach_volume(body, model="coap")
+    for vol, words in ((mesh, "has no learned code-refinement passes"), (coap, "no learned code-refinement passes")):
+        assert vol.set_pass_interval(1) is vol
+        with pytest.raises(ValueError, match=words):
+            vol.set_pass_interval(2)
+        with vol.warm_start() as state, vol.warm_keys([0]):
+            assert state is None
