@@ -32,7 +32,7 @@ from typing import Callable
 
 import torch
 
-from volsmpl.volume.keyed_state import KeyedPartState, code_change
+from volsmpl.volume.keyed_state import KeyedPartState
 from volsmpl.volume.warm_codes import WARM_MAX_CHANGE
 
 __all__ = ["CarriedPasses", "check_pass_interval"]
@@ -59,10 +59,8 @@ class CarriedPasses(KeyedPartState):
     FIELDS = {"delta": ("L",), "age": ()}
 
     def __init__(self, num_parts: int, every: int, max_change: float = WARM_MAX_CHANGE):
-        if not max_change > 0:
-            raise ValueError(f"max_change must be > 0 (a relative code change), got {max_change}")
-        super().__init__(num_parts)
-        self.every, self.max_change = check_pass_interval(every), float(max_change)
+        super().__init__(num_parts, max_change)
+        self.every = check_pass_interval(every)
         self.encoded = self.passed = self.restarted = 0
 
     def apply(self, net, z: torch.Tensor, points: Callable[[], tuple], parts: torch.Tensor | None) -> torch.Tensor:
@@ -76,11 +74,9 @@ class CarriedPasses(KeyedPartState):
         if Kc == 0:
             return z
         zd = z.detach()
-        rows = self.rows_of(B, zd)[:, None]
-        kk = (torch.arange(self.num_parts, device=zd.device) if parts is None else parts.to(zd.device))[None]
+        rows, kk, had, jumped = self.lookup(zd, parts)
         s = self.state
-        had, age, delta = s["have"][rows, kk], s["age"][rows, kk], s["delta"][rows, kk]
-        jumped = had & (code_change(zd, s["zref"][rows, kk]) > self.max_change)
+        age, delta = s["age"][rows, kk], s["delta"][rows, kk]
         due = ~had | jumped | (age + 1 >= self.every)                       # (B, K') codes to pass anew
         self.encoded += B * Kc
         fresh = due.any(dim=1)[:, None] & due.any(dim=0)[None]             # the block of bodies x parts passed

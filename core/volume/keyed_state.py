@@ -8,7 +8,7 @@ codes can be closer than one body's codes after one optimisation step (docs/code
 
     state = WarmCodes(num_parts=16)                 # a KeyedPartState
     with state.keys(torch.tensor([4, 9])): ...      # the next encodings hold bodies 4 and 9
-    rows = state.rows_of(2, z)                      # (2,) their rows in state.state's tensors (B, K, ...)
+    rows, kk, had, jumped = state.lookup(z, parts)  # where codes z (B, K', L) of `parts` stand in state.state
 """
 from __future__ import annotations
 
@@ -36,12 +36,16 @@ class KeyedPartState:
 
     Args:
         num_parts: K, the volume's parts.
+        max_change: relative change of a (key, part)'s code since its state was made above which it jumped (> 0;
+            inf: never).
     """
 
     FIELDS: dict[str, tuple] = {}
 
-    def __init__(self, num_parts: int):
-        self.num_parts = int(num_parts)
+    def __init__(self, num_parts: int, max_change: float):
+        if not max_change > 0:
+            raise ValueError(f"max_change must be > 0 (a relative code change), got {max_change}")
+        self.num_parts, self.max_change = int(num_parts), float(max_change)
         self._ids: torch.Tensor | None = None
         self._rows: dict[int, int] = {}
         self.state: dict[str, torch.Tensor] = {}
@@ -85,3 +89,13 @@ class KeyedPartState:
             have = torch.zeros(len(new), K, dtype=torch.bool, device=like.device)
             s["have"] = have if "have" not in s else torch.cat([s["have"], have])
         return torch.tensor([self._rows[int(i)] for i in ids.tolist()], device=like.device)
+
+    def lookup(self, z: torch.Tensor, parts: torch.Tensor | None) -> tuple:
+        """Where an encoding's codes z (B, K', L) of `parts` ((K',) ids; None: all K) stand in the state: (rows
+        (B, 1) and part ids (1, K') that index it, had (B, K'): which (body, part) holds state, jumped (B, K'):
+        which of those moved by more than `max_change` of its code's norm since its state was made)."""
+        zd = z.detach()
+        rows = self.rows_of(z.shape[0], zd)[:, None]
+        kk = (torch.arange(self.num_parts, device=zd.device) if parts is None else parts.to(zd.device))[None]
+        had = self.state["have"][rows, kk]
+        return rows, kk, had, had & (code_change(zd, self.state["zref"][rows, kk]) > self.max_change)

@@ -27,7 +27,7 @@ from __future__ import annotations
 import torch
 
 from volsmpl.volume.code_refinement import REFINE_LR, REFINE_WARMUP, adam_steps, check_refine_steps
-from volsmpl.volume.keyed_state import KeyedPartState, code_change
+from volsmpl.volume.keyed_state import KeyedPartState
 
 __all__ = ["WarmCodes", "WARM_MAX_CHANGE"]
 
@@ -57,12 +57,10 @@ class WarmCodes(KeyedPartState):
                  warmup: int = WARM_WARMUP):
         if check_refine_steps(steps) < 1:
             raise ValueError(f"warm code refinement needs steps >= 1 per encoding, got {steps}")
-        if not max_change > 0:
-            raise ValueError(f"max_change must be > 0 (a relative code change), got {max_change}")
         if not isinstance(warmup, int) or warmup < 0:
             raise ValueError(f"warmup must be an integer >= 0 (steps), got {warmup!r}")
-        super().__init__(num_parts)
-        self.steps, self.lr, self.max_change = steps, float(lr), float(max_change)
+        super().__init__(num_parts, max_change)
+        self.steps, self.lr = steps, float(lr)
         self.warmup = warmup
         self.encoded = self.restarted = 0
 
@@ -77,12 +75,9 @@ class WarmCodes(KeyedPartState):
         if Kc == 0:
             return z
         zd = z.detach()
-        rows = self.rows_of(B, zd)[:, None]
-        kk = (torch.arange(self.num_parts, device=zd.device) if parts is None else parts.to(zd.device))[None]
+        rows, kk, had, restart = self.lookup(zd, parts)
         s = self.state
         delta, m1, m2, t = (s[n][rows, kk].clone() for n in ("delta", "m1", "m2", "t"))
-        had, zref = s["have"][rows, kk], s["zref"][rows, kk]
-        restart = had & (code_change(zd, zref) > self.max_change)
         fresh = (~had | restart)[..., None]
         delta, m1, m2, t = (x.masked_fill(fresh, 0) for x in (delta, m1, m2, t))
         var = adam_steps(net, zd + delta, xin, target, scale, parts, self.steps, m1, m2, t, self.lr, cosine=False,
