@@ -27,6 +27,8 @@ The options:
   --quiet                    no progress bars (they show only on a terminal anyway: none in a log file)
   --refine-steps R           refine the learned kinds' part codes by R optimiser steps at every encoding (0: none)
   --refine-warm              with R >= 1: carry each body's refinement from one iteration of the fit to the next
+  --passes P                 a VolumetricSMPL with learned code-refinement passes runs only its first P of them
+                             (0: the encoder's codes; default: all it has)
   --pass-every N             a VolumetricSMPL with learned code-refinement passes runs them at every N-th iteration
                              of a fit and carries their correction between (1: at every encoding)
 
@@ -41,18 +43,21 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ["REFINE_OPTIONS", "add_common", "check_common", "check_threads", "check_refinement", "code_refinement",
+           "learned_pass_defaults",
            "parse_kinds", "checkpoints", "volumes",
            "checkpoint_names", "CaseRecords", "envelope", "flag_cases", "print_flagged", "case_records",
            "write_results"]
 
 #: the argparse dests of the code-refinement options (every app's modes that encode bodies read all of them)
-REFINE_OPTIONS = frozenset({"refine_steps", "refine_warm", "pass_every"})
+REFINE_OPTIONS = frozenset({"refine_steps", "refine_warm", "passes", "pass_every"})
 
 
 def add_common(p, *, out: str | None, model: str = "volsmpl,coap,mesh", none: bool = False, render: int = 3,
-               seed: str | None = "the seed of the case data", resume: str | None = None) -> None:
+               seed: str | None = "the seed of the case data", resume: str | None = None,
+               passes: int | None = None, pass_every: int = 1) -> None:
     """Add the shared options to an app's parser (module docstring); `none`: the app accepts the kind 'none';
-    seed=None: the app has no seeded case data (no --seed)."""
+    seed=None: the app has no seeded case data (no --seed). passes, pass_every: the app's defaults of --passes
+    and --pass-every for a VolumetricSMPL with learned passes (`learned_pass_defaults` applies them)."""
     from volsmpl.volume.models import MODELS
 
     kinds = ("none, " if none else "") + ", ".join(MODELS)
@@ -79,10 +84,16 @@ def add_common(p, *, out: str | None, model: str = "volsmpl,coap,mesh", none: bo
     p.add_argument("--refine-warm", action="store_true",
                    help="with --refine-steps R: each encoding continues the same bodies' refinement from the "
                         "previous iteration of the fit (volsmpl.volume.warm_codes), R steps per iteration")
-    p.add_argument("--pass-every", type=int, default=1,
+    p.add_argument("--passes", type=int, default=None,
+                   help="with a VolumetricSMPL checkpoint that has learned code-refinement passes: run only the first "
+                        "P of them at each encoding (0: the encoder's codes as they are; default: "
+                        + ("all it has)" if passes is None else f"{passes}, or all it has if fewer)"))
+    p.add_argument("--pass-every", type=int, default=None,
                    help="with a VolumetricSMPL checkpoint that has learned code-refinement passes: run them at every "
                         "N-th iteration of a fit and add their correction to the encoder's codes of the iterations "
-                        "between (volsmpl.volume.carried_passes; default 1: at every encoding)")
+                        f"between (volsmpl.volume.carried_passes; default {pass_every} where passes run, else 1; "
+                        "1: at every encoding)")
+    p.set_defaults(app_passes=passes, app_pass_every=pass_every)
 
 
 def parse_kinds(text: str, none: bool = False) -> list[str]:
@@ -134,6 +145,7 @@ def check_common(args, none: bool = False) -> tuple[list[str], dict]:
 
     models = parse_kinds(args.model, none)
     ckpts = checkpoints(args, models)
+    learned_pass_defaults(args, models, ckpts)
     check_refinement(args, models)
     check_threads(args.threads)
     if args.render < 0:
@@ -142,17 +154,40 @@ def check_common(args, none: bool = False) -> tuple[list[str], dict]:
     return models, ckpts
 
 
+def learned_pass_defaults(args, models: list[str], ckpts: dict) -> None:
+    """Set `--passes` and `--pass-every` where not given: the app's defaults (`add_common`'s passes, pass_every)
+    for the VolumetricSMPL checkpoint that runs (its passes read from its JSON, no weights loaded): passes at most
+    the checkpoint's (`args.passes_by_default` then True), the interval only where passes run (else 1). Without
+    volsmpl, or a checkpoint without passes: passes None, interval 1."""
+    from volsmpl.io.checkpoint import load_checkpoint
+    from volsmpl.volume.models import model_kind
+
+    has = 0
+    if "volsmpl" in models and not getattr(args, "random_init", False):
+        _, cfg, _ = load_checkpoint(ckpts.get("volsmpl") or model_kind("volsmpl").default_checkpoint, weights=False)
+        has = int(cfg.get("refiner_iters", 0) or 0)
+    default = getattr(args, "app_passes", None)
+    if getattr(args, "passes", None) is None and default is not None and has:
+        args.passes, args.passes_by_default = min(int(default), has), True
+    if getattr(args, "pass_every", 1) is None:
+        runs = has if getattr(args, "passes", None) is None else min(args.passes, has)
+        args.pass_every = int(getattr(args, "app_pass_every", 1) or 1) if runs and "volsmpl" in models else 1
+
+
 def check_refinement(args, models: list[str]) -> None:
-    """`--refine-steps R` (an integer >= 0), `--refine-warm` (needs R >= 1) for a run with a learned kind, and
-    `--pass-every N` (an integer >= 1; above 1 with volsmpl and without --refine-warm). Whether the VolumetricSMPL
-    checkpoint has learned passes is checked where it is loaded (`volumes`)."""
+    """`--refine-steps R` (an integer >= 0), `--refine-warm` (needs R >= 1) for a run with a learned kind,
+    `--passes P` (an integer >= 0, with volsmpl) and `--pass-every N` (an integer >= 1; above 1 with volsmpl, without
+    --refine-warm and not with --passes 0). How many learned passes the VolumetricSMPL checkpoint has is checked
+    where it is loaded (`volumes`)."""
     from volsmpl.volume.carried_passes import check_pass_interval
     from volsmpl.volume.code_refinement import check_refine_steps
     from volsmpl.volume.models import model_kind
+    from volsmpl.volume.refinement_setting import check_passes
 
     steps, warm = getattr(args, "refine_steps", 0), getattr(args, "refine_warm", False)
-    every = getattr(args, "pass_every", 1)
+    every, passes = getattr(args, "pass_every", 1), getattr(args, "passes", None)
     for flag, value, check in (("--refine-steps", steps, check_refine_steps),
+                               ("--passes", passes, check_passes),
                                ("--pass-every", every, check_pass_interval)):
         try:
             check(value)
@@ -169,19 +204,34 @@ def check_refinement(args, models: list[str]) -> None:
     if every > 1 and warm:
         raise ValueError(f"--pass-every {every} carries the learned passes' correction and --refine-warm its own: "
                          f"use one of them")
+    if passes is not None and "volsmpl" not in models:
+        raise ValueError(f"--passes {passes} sets VolumetricSMPL's learned passes; --model {','.join(models)} does "
+                         f"not run volsmpl: add it or drop the option")
+    if passes == 0 and every > 1 and getattr(args, "passes_by_default", False):
+        raise ValueError(f"--pass-every {every} runs the learned passes at an interval, and this app runs none by "
+                         f"default (--passes 0): give --passes 1 or more with it, or drop --pass-every")
+    if passes == 0 and every > 1:
+        raise ValueError(f"--pass-every {every} runs the learned passes at an interval, and --passes 0 runs none: "
+                         f"drop one of them")
 
 
-def code_refinement(args) -> dict:
-    """What results.json records of the code refinement: {'steps': R, 'warm': bool, 'pass_every': N}."""
+def code_refinement(args, vols: dict | None = None) -> dict:
+    """The code-refinement options: {'steps': R, 'warm': bool, 'passes': P, 'pass_every': N}; P is `--passes`
+    (None: all the VolumetricSMPL checkpoint has) or, given the run's `vols` with volsmpl among them, the learned
+    passes its volume runs (what results.json records)."""
+    passes = getattr(args, "passes", None)
+    if vols and vols.get("volsmpl") is not None:
+        passes = vols["volsmpl"].active_passes
     return {"steps": int(getattr(args, "refine_steps", 0)), "warm": bool(getattr(args, "refine_warm", False)),
-            "pass_every": int(getattr(args, "pass_every", 1))}
+            "passes": None if passes is None else int(passes), "pass_every": int(getattr(args, "pass_every", 1))}
 
 
 def volumes(body, models: list[str], ckpts: dict, device: str = "cpu", random_init: bool = False,
             encoder_bf16: bool = False, refine: dict | None = None) -> dict:
     """One volume per kind, attached to `body` on `device` (kind 'none': None). random_init: untrained networks;
     encoder_bf16: the learned kinds' part encoder under bfloat16 autocast; refine: `code_refinement(args)`, set on
-    the learned kinds (`Volume.set_code_refinement`) and its pass interval on volsmpl (`Volume.set_pass_interval`)."""
+    the learned kinds (`Volume.set_code_refinement`) and its passes and their interval on volsmpl
+    (`Volume.set_passes`, `Volume.set_pass_interval`)."""
     import volsmpl
     from volsmpl.volume.models import model_kind
 
@@ -199,6 +249,8 @@ def volumes(body, models: list[str], ckpts: dict, device: str = "cpu", random_in
             vol.net.encoder_bf16 = encoder_bf16
             if refine:
                 vol.set_code_refinement(refine["steps"], warm=refine["warm"])
+        if m == "volsmpl" and refine and refine.get("passes") is not None:
+            vol.set_passes(refine["passes"])              # ValueError (one line) for more than the model has
         if m == "volsmpl" and refine and refine.get("pass_every", 1) != 1:
             vol.set_pass_interval(refine["pass_every"])   # ValueError (one line) for a model without passes
         out[m] = vol.to(device)
@@ -239,6 +291,9 @@ class CaseRecords:
         refine = getattr(volume, "refine_steps", 0)
         if refine:   # the codes depend on it; keys of runs without it stay as they were
             spec = {**spec, "code_refinement": [refine, bool(volume.refine_warm)]}
+        passes = getattr(volume, "passes", None)
+        if passes is not None:
+            spec = {**spec, "passes": passes}
         every = getattr(volume, "pass_every", 1)
         if every != 1:
             spec = {**spec, "pass_every": every}

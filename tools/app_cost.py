@@ -30,15 +30,19 @@ from pathlib import Path
 
 import numpy as np
 
-#: setting name -> the flags it adds to every app's command
+#: setting name -> the flags it adds to every app's command; the settings with learned passes pin --passes and
+#: --pass-every, which otherwise take each app's defaults for such a checkpoint ('r3_app_defaults')
+R1, R3 = "checkpoints/volsmpl_r1/ckpt-00053000/model", "checkpoints/volsmpl_r3/ckpt-00057000/model"
 SETTINGS = {
     "shipped": [],
     "step50k": ["--checkpoint-volsmpl", "checkpoints/volsmpl_b8q/ckpt-00050000/model"],
-    "r1": ["--checkpoint-volsmpl", "checkpoints/volsmpl_r1/ckpt-00053000/model"],
-    "r3": ["--checkpoint-volsmpl", "checkpoints/volsmpl_r3/ckpt-00057000/model"],
+    "r1": ["--checkpoint-volsmpl", R1, "--passes", "1", "--pass-every", "1"],
+    "r3": ["--checkpoint-volsmpl", R3, "--passes", "2", "--pass-every", "1"],
     "step50k_warm1": ["--checkpoint-volsmpl", "checkpoints/volsmpl_b8q/ckpt-00050000/model",
                       "--refine-steps", "1", "--refine-warm"],
-    "r3_every4": ["--checkpoint-volsmpl", "checkpoints/volsmpl_r3/ckpt-00057000/model", "--pass-every", "4"],
+    "r3_every4": ["--checkpoint-volsmpl", R3, "--passes", "2", "--pass-every", "4"],
+    "r3_passes1": ["--checkpoint-volsmpl", R3, "--passes", "1", "--pass-every", "1"],
+    "r3_app_defaults": ["--checkpoint-volsmpl", R3],
 }
 
 HOI_CASES = ("lean_table_0050,push_cart_0051,sit_chair_0052,sit_stool_0053,sit_sofa_0054,lie_bed_0055,hold_box_0056,"

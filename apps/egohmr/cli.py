@@ -51,7 +51,9 @@ def add_parser(sub):
     p.add_argument("action", nargs="?", default="sample", choices=ACTIONS,
                    help="sample (default): every guide samples the frames; tune: the guidance scale per guide on the "
                         "val split (OUT/tune.json); make-data: the generated frames; train: the network")
-    add_common(p, out=None, model="none,volsmpl,coap,mesh", none=True, render=4,
+    # the learned passes at every 4th guided step: 1.1-1.2x the encoder's cost per frame, the same MPJPE
+    # (docs/learned_refinement.md, "Passes at an interval")
+    add_common(p, out=None, model="none,volsmpl,coap,mesh", none=True, render=4, pass_every=4,
                seed="the seed of the frames and of the sampler's noise",
                resume="sample: reuse each guide's finished samples in OUT/cases/ made by the same code, settings, "
                       "frames and weights; train: continue OUT's run")

@@ -67,14 +67,14 @@ def guide_volumes(args, guides: list[str], ckpts: dict, device) -> dict:
                    refine=code_refinement(args))
 
 
-def run_config(args, guides: list[str], ckpts: dict, scales: dict, frames: int, split: str) -> dict:
-    """What a sample or tune result records of its settings (results.json's config)."""
+def run_config(args, guides: list[str], ckpts: dict, scales: dict, frames: int, split: str, vols: dict) -> dict:
+    """What a sample or tune result records of its settings (results.json's config); vols: the guides' volumes."""
     from volsmpl.apps.table import checkpoint_names, code_refinement
 
     return {"split": split, "frames": frames, "seed": args.seed, "models": guides, "scales": scales,
             "encoder_bf16": args.encoder_bf16, "batch": args.batch, "budget_mb": args.budget_mb,
             "network": args.checkpoint or "apps/egohmr/egohmr_anny",
-            "checkpoints": checkpoint_names(guides, ckpts), "code_refinement": code_refinement(args),
+            "checkpoints": checkpoint_names(guides, ckpts), "code_refinement": code_refinement(args, vols),
             "threads": torch.get_num_threads()}
 
 
@@ -106,7 +106,7 @@ def run_sample(args, ckpts: dict) -> int:
     reg.pop("s_per_frame")
     print(f"regressor (no diffusion): MPJPE {reg['mpjpe_mm']:.1f} mm (vis. {reg['mpjpe_visible_mm']:.1f}, invis. "
           f"{reg['mpjpe_invisible_mm']:.1f})  collision {reg['collision_ratio']:.4f}")
-    config = run_config(args, guides, ckpts, scales, len(frames), args.split)
+    config = run_config(args, guides, ckpts, scales, len(frames), args.split, vols)
     config["checkpoint_meta"] = {k: meta.get(k) for k in ("step", "validation", "train_frames", "seconds")}
     config["bodies"] = FRAME_TABLE
     clear_meshes(out)
@@ -231,7 +231,7 @@ def run_tune(args, ckpts: dict) -> int:
                f"{TUNE_MPJPE_SLACK_MM} mm", "factors": factors,
                "paper_scales": PAPER_SCALE, "encoder_bf16": args.encoder_bf16, "pelvis_step": args.pelvis_step,
                "support": args.support, "rows": rows, "best": best,
-               "complete": complete, "config": run_config(args, guides, ckpts, {}, len(frames), split),
+               "complete": complete, "config": run_config(args, guides, ckpts, {}, len(frames), split, vols),
                "meta": machine_info(args.device)}
         return write_results(args.out, doc, "tune.json")
 

@@ -120,7 +120,7 @@ def run_user_frame(args, ckpts: dict) -> int:
     faces = torch.as_tensor(body.faces, device=dev)
     summary, records, samples = {}, {}, {}
     vols = guide_volumes(args, guides, ckpts, dev)
-    config = {**run_config(args, guides, ckpts, scales, 1, "user"), "frame": str(args.frame), "scene": str(args.scene),
+    config = {**run_config(args, guides, ckpts, scales, 1, "user", vols), "frame": str(args.frame), "scene": str(args.scene),
               "units": args.units, "up": args.up, "spacing": spacing, "cube_points": n_cube,
               "bodies": FRAME_SCENE if frame.has_world else FRAME_CAMERA}
     figure = f"frame_{frame.name}.png"

@@ -301,7 +301,7 @@ def _run(args, models: list, ckpts: dict) -> int:
     check_data(cases, body, args.device, warnings)
     vols = volumes(body, models, ckpts, args.device, refine=code_refinement(args))
     config = {**asdict(cfg), "preset": args.preset, "models": models, "checkpoints": checkpoint_names(models, ckpts),
-              "code_refinement": code_refinement(args), "split": split,
+              "code_refinement": code_refinement(args, vols), "split": split,
               "seed": args.seed, "batch": args.batch, "cases_requested": len(cases),
               "threads": torch.get_num_threads()}
     store = CaseRecords(out, "hoi", resume=args.resume)

@@ -69,7 +69,8 @@ def add_parser(sub):
                    help="run (default): every weight on every room (Tables 5 and D.1; rows <model>_test add the "
                         "tuning split's view); tune: the weights swept on every third room only, each model's best "
                         "weight run on the other rooms (the compared rows), a third of the sweep's cost")
-    add_common(p, out="out/motion", render=1, seed="the first generated room's seed",
+    # one learned pass: 1.17x the encoder's collision term per frame, two 1.38x (docs/learned_refinement.md)
+    add_common(p, out="out/motion", render=1, seed="the first generated room's seed", passes=1,
                resume="reuse the sequences OUT/cases/ already holds from an identical run (same code, weights, "
                       "settings and inputs); the others are computed")
     p.add_argument("--scenes", default="2", help="without --scene: 'all' (15 generated rooms) or a number of rooms")
@@ -249,7 +250,7 @@ def _run(args, opt: dict) -> int:
               "coll_frames": coll_frames, "mem_budget_gb": args.mem_budget_gb, "residuals": args.residuals,
               "floor_in_loss": args.floor_in_loss, "user_scene": args.scene, "device": args.device,
               "checkpoints": checkpoint_names(models, ckpts), "batch": args.batch, "protocol": protocol,
-              "encoder_bf16": args.encoder_bf16, "code_refinement": code_refinement(args),
+              "encoder_bf16": args.encoder_bf16, "code_refinement": code_refinement(args, vols),
               "seed": args.seed, "threads": torch.get_num_threads(),
               "objective": "Huber(delta=1)(last pelvis xz, goal) + w * mean_frames sum_points penetration + "
                            "0.1 * max jerk; Adam lr 0.05 linear decay, unit-norm gradients"}

@@ -45,7 +45,8 @@ def add_parser(sub):
                                    "self-penetration loss; report time, memory, iterations, triangle collisions.")
     p.add_argument("action", nargs="?", default="run", choices=ACTIONS,
                    help="run (default): repair the cases; tune: sweep the step size and weights on them (tune.py)")
-    add_common(p, out="out/selfpen", seed=None)
+    # the encoder's codes: the encoding is most of a step, and one learned pass costs 1.7x (docs/learned_refinement.md)
+    add_common(p, out="out/selfpen", seed=None, passes=0)
     p.add_argument("--cases", default="all", help="comma-separated case names from the case file, or 'all'")
     p.add_argument("--case-file", default=str(CASES_FILE), help="JSON case file (default: the shipped 17 cases)")
     p.add_argument("--random-init", action="store_true", help="random network weights (pipeline check only)")
@@ -167,7 +168,7 @@ def _repair(args, cfg, body, vols: dict, cases: list, models: list, ckpts: dict)
         print("note: --random-init: untrained networks, the numbers only check the pipeline")
     config = {**asdict(cfg), "preset": args.preset, "models": models, "random_init": bool(args.random_init),
               "checkpoints": checkpoint_names(models, ckpts, args.random_init), "case_file": str(args.case_file),
-              "code_refinement": code_refinement(args),
+              "code_refinement": code_refinement(args, vols),
               "device_name": torch.cuda.get_device_name(0) if cfg.device == "cuda" else "cpu",
               "threads": torch.get_num_threads()}
     store = CaseRecords(args.out, "selfpen", resume=args.resume)

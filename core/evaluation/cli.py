@@ -57,6 +57,9 @@ def add_parser(sub):
                    help="refine each body's part codes by this many optimiser steps on the posed mesh's own surface "
                         "before querying (volsmpl.volume.code_refinement; default 0: the encoder's codes); each step costs "
                         "about half an encoding")
+    p.add_argument("--passes", type=int, default=None,
+                   help="run only the first P of the checkpoint's learned code-refinement passes (0: the encoder's "
+                        "codes; default: all it has; volsmpl.nn.code_refiner)")
     p.add_argument("--out", default=None, help="write the results as JSON here")
     p.add_argument("--split", default="all", choices=["standard", "self_contact", "all"],
                    help="validation split: the standard set, the self-contact poses (volsmpl.evaluation.contact_split: min(n-bodies, "
@@ -84,7 +87,7 @@ def run(args) -> int:
                      device=args.device, timing=args.timing, timing_repeats=args.repeats, cache_dir=args.cache_dir,
                      use_cache=not args.no_cache, timing_threads=args.threads, gt_sign=args.gt_sign,
                      precision=args.precision, sampling=args.sampling, surface_sigma=args.surface_sigma,
-                     encoder_draws=args.encoder_draws, refine_steps=args.refine_steps)
+                     encoder_draws=args.encoder_draws, refine_steps=args.refine_steps, passes=args.passes)
     init = {"config": {}, "init_seed": 0} if args.random_init else None
     if args.split == "self_contact":
         from volsmpl.evaluation.contact_split import evaluate_self_contact

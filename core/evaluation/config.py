@@ -60,6 +60,8 @@ class EvalConfig:
             the evaluation; None (default): the checkpoint's own (1 unless it was trained with more).
         refine_steps: test-time refinement of the part codes on the posed mesh's own surface
             (`Volume.set_code_refinement`, volsmpl.volume.code_refinement) during the evaluation; 0 (default): none.
+        passes: how many of the model's learned code-refinement passes run (`Volume.set_passes`); None (default):
+            all it has.
     """
 
     n_bodies: int = 64
@@ -82,6 +84,7 @@ class EvalConfig:
     sampling: str = "body"
     encoder_draws: Optional[int] = None
     refine_steps: int = 0
+    passes: Optional[int] = None
 
     def __post_init__(self):
         for name in ("n_bodies", "n_points", "batch_size", "timing_repeats"):
@@ -103,6 +106,9 @@ class EvalConfig:
             raise ValueError(f"--encoder-draws {self.encoder_draws}: give a positive number of surface sample sets.")
         if not isinstance(self.refine_steps, int) or isinstance(self.refine_steps, bool) or self.refine_steps < 0:
             raise ValueError(f"--refine-steps {self.refine_steps}: give an integer >= 0 (0: no code refinement).")
+        if self.passes is not None and (not isinstance(self.passes, int) or isinstance(self.passes, bool)
+                                        or self.passes < 0):
+            raise ValueError(f"--passes {self.passes}: give an integer >= 0 (0: the encoder's codes as they are).")
         if self.sampling not in SAMPLINGS:
             raise ValueError(f"EvalConfig.sampling={self.sampling!r}: use one of {', '.join(SAMPLINGS)}.")
         n_surf = int(round(self.n_points * self.surface_fraction))

@@ -53,7 +53,7 @@ def measure_resources(spec: dict, config: Optional[EvalConfig] = None, **overrid
         job = {"spec": spec, "inputs": inputs, "device": cfg.device, "repeats": cfg.timing_repeats,
                "warmup": cfg.timing_warmup, "threads": cfg.timing_threads or torch.get_num_threads(),
                "precision": cfg.precision, "encoder_draws": cfg.encoder_draws,
-               "refine_steps": cfg.refine_steps}
+               "refine_steps": cfg.refine_steps, "passes": cfg.passes}
         return run_isolated("volsmpl.evaluation.resources:resource_job", job, timeout_s=1800)
 
 
@@ -82,6 +82,8 @@ def resource_job(job: dict) -> dict:
         vol.set_encoder_draws(int(job["encoder_draws"]))
     if job.get("refine_steps"):
         vol.set_code_refinement(int(job["refine_steps"]))
+    if job.get("passes") is not None:
+        vol.set_passes(int(job["passes"]))
     data = torch.load(job["inputs"])
     with torch.no_grad():
         out = body(**{k: v.to(device) for k, v in data["bodies"].items()})

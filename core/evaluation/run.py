@@ -124,6 +124,9 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
     if cfg.refine_steps:
         refine_before = volume.refine_steps
         volume.set_code_refinement(cfg.refine_steps)  # ValueError for a volume without part codes
+    passes_before = volume.passes if cfg.passes is not None else None
+    if cfg.passes is not None:
+        volume.set_passes(cfg.passes)                 # ValueError for more passes than the volume has
     try:
         if volume.is_sdf:
             res = evaluate(lambda out, pts: volume.query(out, pts), bodies=bodies, body=body, config=cfg, name=name)
@@ -137,6 +140,8 @@ def evaluate_volume(volume, body, config: Optional[EvalConfig] = None, name: str
             volume.set_encoder_draws(draws_before)
         if refine_before is not None:
             volume.set_code_refinement(refine_before)
+        if cfg.passes is not None:
+            volume.set_passes(passes_before)
     if not volume.is_sdf:
         for k in [k for k in res.metrics if k.startswith("mse")]:  # not distances: no SDF error to report
             res.metrics[k] = None

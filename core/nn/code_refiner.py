@@ -24,6 +24,7 @@ PointNet, and the codes' own input z_k.
 
     refiner = LearnedCodeRefiner(num_parts=16, latent_dim=128, hidden=64, blocks=3, iters=1)
     z = refiner(net, z, xin, target, scale, parts)     # z (B, K', 128), xin (B, K', m, 3), target (B, K', m)
+    z1 = refiner(net, z, xin, target, scale, parts, passes=1)   # the first pass only
 """
 from __future__ import annotations
 
@@ -114,22 +115,25 @@ class LearnedCodeRefiner(nn.Module):
             self.head.append(h)
 
     def forward(self, net, z: torch.Tensor, xin: torch.Tensor, target: torch.Tensor, scale,
-                parts: torch.Tensor | None = None) -> torch.Tensor:
-        """The refined codes.
+                parts: torch.Tensor | None = None, passes: int | None = None) -> torch.Tensor:
+        """The refined codes after the first `passes` passes (None: all `iters`; 0: z as it is).
 
         Shape: z (B, K', latent) codes of `parts` ((K',) ids; None: all K), xin (B, K', m, 3) refinement points in
         the decoders' input frames, target (B, K', m) metres, scale (B, K', 1) or None -> (B, K', latent).
         """
+        passes = self.iters if passes is None else passes
+        if isinstance(passes, bool) or not isinstance(passes, int) or not 0 <= passes <= self.iters:
+            raise ValueError(f"LearnedCodeRefiner: passes {passes!r} is not an integer in 0..{self.iters}")
         B, Kc, m = target.shape
         if z.shape[:2] != (B, Kc) or xin.shape[:3] != (B, Kc, m):
             raise ValueError(f"LearnedCodeRefiner: codes {tuple(z.shape)}, points {tuple(xin.shape)} and targets "
                              f"{tuple(target.shape)} disagree on (bodies, parts, points)")
-        if Kc == 0:
+        if Kc == 0 or passes == 0:
             return z
         ids = torch.arange(self.num_parts, device=z.device) if parts is None else parts
         onehot = torch.nn.functional.one_hot(ids, self.num_parts).to(z.dtype).expand(B, -1, -1)
         t_feat = (target / RESIDUAL_SIGMA)[..., None]
-        for it in range(self.iters):
+        for it in range(passes):
             with torch.enable_grad():
                 zg = z.detach().requires_grad_(True)
                 pred = decode_targets(net, zg, xin, scale, parts)

@@ -153,13 +153,22 @@ def flagged_note(data: dict) -> list[str]:
 
 def refinement_note(data: dict) -> list[str]:
     """How the learned back-ends' part codes were made (results.json `config.code_refinement`: {steps, warm,
-    pass_every}); nothing for a result made before the apps recorded it."""
+    passes, pass_every}); nothing for a result made before the apps recorded it."""
     r = (data.get("config") or {}).get("code_refinement")
     if not isinstance(r, dict):
         return []
-    steps, every = r.get("steps") or 0, r.get("pass_every") or 1
-    passes = (f" VolumetricSMPL's learned passes ran at every {fmt(every)}th iteration of a fit, their correction "
-              f"carried between (`--pass-every {fmt(every)}`; docs/learned_refinement.md)." if every > 1 else "")
+    steps, every, n = r.get("steps") or 0, r.get("pass_every") or 1, r.get("passes")
+    passes = ""
+    if n:
+        when = (f"at every {fmt(every)}th iteration of a fit, their correction carried between (`--pass-every "
+                f"{fmt(every)}`)" if every > 1 else "at every encoding")
+        passes = (f" VolumetricSMPL's codes corrected by {fmt(n)} learned pass{'' if n == 1 else 'es'} {when} "
+                  f"(docs/learned_refinement.md).")
+    elif every > 1:   # a result made before the apps recorded the passes
+        passes = (f" VolumetricSMPL's learned passes ran at every {fmt(every)}th iteration of a fit, their correction "
+                  f"carried between (`--pass-every {fmt(every)}`; docs/learned_refinement.md).")
+    if not steps and n:
+        return ["", "Part codes: one encoding per body and step, without fitted refinement steps." + passes]
     if not steps:
         return ["", "Part codes: the encoder's, one encoding per body and step (no code refinement)." + passes]
     how = ("carried from each iteration to the next (`--refine-warm`)" if r.get("warm")

@@ -73,6 +73,18 @@ class BodyVolume(torch.nn.Module):
                              f"({every!r}) does not apply; drop the setting for it.")
         return self
 
+    #: learned code-refinement passes each encoding runs (none: this kind has no part codes), and the count set
+    active_passes: int = 0
+    passes: int | None = None
+
+    def set_passes(self, passes) -> "BodyVolume":
+        """Set how many learned code-refinement passes run; kinds without them (the exact mesh) refuse a count
+        above 0 (ValueError, one line) and take None or 0."""
+        if passes not in (None, 0) or isinstance(passes, bool):
+            raise ValueError(f"the {self.kind} volume has no learned code-refinement passes, so a count of them "
+                             f"({passes!r}) does not apply; drop the setting for it.")
+        return self
+
     @contextlib.contextmanager
     def warm_start(self):
         """One optimisation's scope of code corrections carried from one encoding to the next; kinds without part

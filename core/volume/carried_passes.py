@@ -63,9 +63,10 @@ class CarriedPasses(KeyedPartState):
         self.every = check_pass_interval(every)
         self.encoded = self.passed = self.restarted = 0
 
-    def apply(self, net, z: torch.Tensor, points: Callable[[], tuple], parts: torch.Tensor | None) -> torch.Tensor:
-        """z + delta, delta each (body, part)'s carried correction, or a new one from the passes (`net.refiner`)
-        when the encoding is due (module docstring); the state updated.
+    def apply(self, net, z: torch.Tensor, points: Callable[[], tuple], parts: torch.Tensor | None,
+              passes: int | None = None) -> torch.Tensor:
+        """z + delta, delta each (body, part)'s carried correction, or a new one from the first `passes` passes
+        (`net.refiner`; None: all) when the encoding is due (module docstring); the state updated.
 
         Shape: z (B, K', latent) encoder codes of `parts` ((K',) ids, None: all K); points() -> the refinement
         points (xin, target, scale) of `refinement_points`, called only when the passes run -> (B, K', latent).
@@ -86,7 +87,8 @@ class CarriedPasses(KeyedPartState):
             bi, pi = bodies.nonzero()[:, 0], due_parts.nonzero()[:, 0]
             sub = (bi[:, None], pi[None])
             with torch.no_grad():
-                new = net.refiner(net, zd[sub], xin[sub], target[sub], None if scale is None else scale[sub], kk[0, pi])
+                new = net.refiner(net, zd[sub], xin[sub], target[sub], None if scale is None else scale[sub], kk[0, pi],
+                                  passes=passes)
             delta = delta.index_put(sub, new - zd[sub])
             self.passed += int(fresh.sum())
             self.restarted += int(jumped.any(dim=1).sum())

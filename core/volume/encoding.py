@@ -60,8 +60,8 @@ class Encoding:
 
 class EncodingCache:
     """The encoding cache of a Volume: needs the Volume's `net`, `refine_steps`, `refine_warm`, `warm`,
-    `pass_every`, `carried`, `warm_serial`, `_encode`, `_frames`, `_replays`, `_lean_chunks`, `num_parts`, `_last`
-    (the last constant encoding, None at first) and `training`."""
+    `active_passes`, `pass_every`, `carried`, `warm_serial`, `_encode`, `_frames`, `_replays`, `_lean_chunks`,
+    `num_parts`, `_last` (the last constant encoding, None at first) and `training`."""
 
     def encode(self, out, generator: torch.Generator | None = None, fresh: bool = False) -> Encoding:
         """Encode a body output (B bodies); cached on the output and reused while the values of its tensors
@@ -91,11 +91,12 @@ class EncodingCache:
         and full_pose and of every weight and buffer of the volume (volsmpl.volume.fingerprint; ~1 ms for the
         3.6 M weights on one CPU thread), in one fingerprint: one read of device values (on a GPU, one wait); and
         the network's encoder arithmetic (`net.encoder_bf16`), the code refinement's steps (`refine_steps`), warm
-        mode and warm scope (`refine_warm`, `warm_serial`) and the learned passes' interval (`pass_every`) and its
-        scope, which change the codes without changing a tensor."""
+        mode and warm scope (`refine_warm`, `warm_serial`), the learned passes run (`active_passes`) and their
+        interval (`pass_every`) and its scope, which change the codes without changing a tensor."""
         return fingerprint((out.vertices, out.joints, out.full_pose, *self.parameters(), *self.buffers())) + (
             ("encoder_bf16", bool(self.net.encoder_bf16)), ("refine_steps", int(self.refine_steps)),
             ("refine_warm", bool(self.refine_warm), self.warm_serial if self.warm is not None else -1),
+            ("passes", int(self.active_passes)),
             ("pass_every", int(self.pass_every), self.warm_serial if self.carried is not None else -1))
 
     def _store(self, out, enc: Encoding, key: tuple) -> None:

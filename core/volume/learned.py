@@ -131,6 +131,7 @@ class Volume(EncodingCache, CodeRefinementSetting, LeanQuery, BodyVolume):
         self.refine_steps = 0   # set_code_refinement
         self.refine_warm = False
         self.warm: WarmCodes | None = None   # the open warm_start's state of warm code refinement
+        self.passes = None      # set_passes (None: all the network's learned passes)
         self.pass_every = 1     # set_pass_interval
         self.carried: CarriedPasses | None = None   # the open warm_start's state of carried learned passes
         self.warm_serial = 0                 # warm_start scopes opened so far (part of the cache key)
@@ -164,7 +165,7 @@ class Volume(EncodingCache, CodeRefinementSetting, LeanQuery, BodyVolume):
         """Whether the encode of `out` (with the fixed surface samples) is a CUDA-graph replay: cuda_graphs on, a
         CUDA output, autograd off (EncodeGraphs.supports), no code refinement (fitted or learned); a key whose
         capture failed is then encoded eagerly."""
-        return (self.cuda_graphs and not self.refine_steps and self.net.refiner is None
+        return (self.cuda_graphs and not self.refine_steps and not self.active_passes
                 and self.encode_graphs.supports(out))
 
     def _encode_eager(self, out, generator, parts: torch.Tensor | None = None, frames=None,
@@ -194,11 +195,12 @@ class Volume(EncodingCache, CodeRefinementSetting, LeanQuery, BodyVolume):
                 fit = bool(self.refine_steps) and generator is None and not self.training
                 # the refinement points, made once and only where a pass or step needs them
                 points = functools.cache(lambda: refinement_points(p, v, Gs, cs, ss, parts))
-                if self.net.refiner is not None:   # the learned passes, also in training
+                passes = self.active_passes
+                if passes:   # the learned passes, also in training
                     if self.carried is not None and generator is None and not self.training:
-                        z = self.carried.apply(self.net, z, points, parts)
+                        z = self.carried.apply(self.net, z, points, parts, passes)
                     else:
-                        z = self.net.refiner(self.net, z, *points(), parts)
+                        z = self.net.refiner(self.net, z, *points(), parts, passes=passes)
                 if fit and self.warm is not None:
                     z = self.warm.refine(self.net, z, *points(), parts)
                 elif fit:

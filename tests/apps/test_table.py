@@ -7,7 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from volsmpl.apps.table import CaseRecords, volumes
+from types import SimpleNamespace
+
+from volsmpl.apps.table import CaseRecords, learned_pass_defaults, volumes
 from volsmpl.body.model import create_body
 from volsmpl.cli import main as cli_main
 
@@ -33,6 +35,15 @@ SHIPPED = str(ROOT / "core" / "assets" / "volsmpl_anny")
     (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--pass-every", "2",
       "--checkpoint-volsmpl", SHIPPED], ["--pass-every 2", "no learned code-refinement passes"]),
     (["hoi", "tune", "--pass-every", "2"], ["--pass-every", "does not apply to `volsmpl hoi tune`"]),
+    (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--passes", "-1"], ["--passes -1", "integer >= 0"]),
+    (["motion", "--model", "coap,mesh", "--passes", "1"], ["--passes 1 sets VolumetricSMPL's", "--model coap,mesh"]),
+    (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--checkpoint-volsmpl", R3, "--passes", "0",
+      "--pass-every", "2"], ["--pass-every 2", "--passes 0 runs none"]),
+    (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--checkpoint-volsmpl", R3, "--passes", "3"],
+     ["--passes 3: this model has 2 learned code-refinement passes"]),
+    (["hoi", "tune", "--passes", "1"], ["--passes", "does not apply to `volsmpl hoi tune`"]),
+    (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--checkpoint-volsmpl", R3, "--pass-every", "2"],
+     ["--pass-every 2", "this app runs none by default (--passes 0)", "give --passes 1 or more"]),
 ])
 def test_refinement_options_are_checked_before_any_work(argv, words, tmp_path, capsys):
     assert cli_main(argv + ["--out", str(tmp_path / "o")]) == 2
@@ -68,7 +79,7 @@ def test_a_warm_run_records_its_setting(tmp_path):
                    "--out", str(tmp_path)])
     assert rc == 0
     res = json.loads((tmp_path / "results.json").read_text())
-    assert res["config"]["code_refinement"] == {"steps": 1, "warm": True, "pass_every": 1}
+    assert res["config"]["code_refinement"] == {"steps": 1, "warm": True, "passes": 0, "pass_every": 1}
     (case,) = res["cases"]["volsmpl"]
     assert case["name"] == "arm_through_head" and len(case["body_pose"]) == 69
 
@@ -76,7 +87,24 @@ def test_a_warm_run_records_its_setting(tmp_path):
 def test_a_run_with_passes_at_an_interval_records_it(tmp_path):
     rc = cli_main(["selfpen", "--model", "volsmpl", "--cases", "arm_through_head", "--max-iters", "3",
                    "--n-points", "32", "--threads", "1", "--render", "0", "--checkpoint-volsmpl", R3,
-                   "--pass-every", "2", "--out", str(tmp_path)])
+                   "--passes", "2", "--pass-every", "2", "--out", str(tmp_path)])
     assert rc == 0
     res = json.loads((tmp_path / "results.json").read_text())
-    assert res["config"]["code_refinement"] == {"steps": 0, "warm": False, "pass_every": 2}
+    assert res["config"]["code_refinement"] == {"steps": 0, "warm": False, "passes": 2, "pass_every": 2}
+
+
+@pytest.mark.parametrize("models, ckpt, given, app, want", [
+    # an app's defaults (passes 1, every 4th iteration) where the checkpoint has two passes
+    (["volsmpl"], R3, (None, None), (1, 4), (1, 4)),
+    (["volsmpl", "coap"], R3, (None, None), (None, 4), (None, 4)),     # default passes: all the checkpoint has
+    (["volsmpl"], R3, (2, None), (1, 4), (2, 4)),                      # given values stay
+    (["volsmpl"], R3, (None, 2), (1, 4), (1, 2)),
+    (["volsmpl"], R3, (None, None), (0, 4), (0, 1)),                   # no passes run: no interval
+    (["volsmpl"], None, (None, None), (1, 4), (None, 1)),              # the shipped model has none
+    (["volsmpl"], SHIPPED, (None, None), (None, 4), (None, 1)),
+    (["coap", "mesh"], None, (None, None), (1, 4), (None, 1)),          # without volsmpl: nothing set
+])
+def test_an_apps_pass_defaults_follow_the_checkpoint(models, ckpt, given, app, want):
+    args = SimpleNamespace(passes=given[0], pass_every=given[1], app_passes=app[0], app_pass_every=app[1])
+    learned_pass_defaults(args, models, {"volsmpl": ckpt} if "volsmpl" in models else {})
+    assert (args.passes, args.pass_every) == want
