@@ -186,13 +186,9 @@ def check_refinement(args, models: list[str]) -> None:
 
     steps, warm = getattr(args, "refine_steps", 0), getattr(args, "refine_warm", False)
     every, passes = getattr(args, "pass_every", 1), getattr(args, "passes", None)
-    for flag, value, check in (("--refine-steps", steps, check_refine_steps),
-                               ("--passes", passes, check_passes),
-                               ("--pass-every", every, check_pass_interval)):
-        try:
-            check(value)
-        except ValueError as e:
-            raise ValueError(f"{flag} {value}: {str(e).split(': ', 1)[-1]}") from None
+    check_refine_steps(steps, "--refine-steps")
+    check_passes(passes, "--passes")
+    check_pass_interval(every, "--pass-every")
     if warm and steps == 0:
         raise ValueError("--refine-warm carries the code refinement across iterations: give --refine-steps 1 (or more)")
     if steps and not any(m != "none" and model_kind(m).learned for m in models):

@@ -40,7 +40,7 @@ phase starts from a model checkpoint (--init) and anneals from `lr` at step `ann
 Data of step s on rank r depend only on (seed, s, r), so a resumed run continues exactly, and `num_workers`
 processes can make batches ahead of the step (DataLoader workers, one torch thread each) with the same result:
 on a GPU machine the exact ground truth (CPU) would otherwise starve the GPU. Training states
-(model, optimised weights and Adam's moments in safetensors files of at most 16 MB each, nothing pickled, sha256
+(model, optimised weights and Adam's moments in safetensors files of at most 16 MiB each, nothing pickled, sha256
 of every file in state.json: `volsmpl.train.state`) are written to <out>/ckpt-<step>/ and published by
 atomically replacing <out>/latest; they continue on any device type; <out>/log.csv holds the losses, <out>/profile.jsonl the time breakdown of
 the logged steps (batch, ground truth, forward+backward, optimiser: `volsmpl.train.batches.StepProfile`). Multi-process: torchrun (DDP, gloo on

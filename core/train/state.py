@@ -1,7 +1,7 @@
 """Training-state folders of `volsmpl train`: write, verify and read back ``<out>/ckpt-<step>/``.
 
 A training state is everything a run needs to continue exactly, in files small enough to move one at a time
-(none over ``SHARD_BYTES``, 16 MB, for the shipped model configurations) and independent of the device that
+(none over ``SHARD_BYTES``, 16 MiB, for the shipped model configurations) and independent of the device that
 wrote them (every tensor is stored on the CPU; reading moves it to the training device)::
 
     ckpt-00012000/
@@ -37,7 +37,7 @@ from volsmpl.train.config import same_weights_config
 
 STATE_FORMAT = "volsmpl-train-state"
 STATE_VERSION = 2
-SHARD_BYTES = 16_000_000
+SHARD_BYTES = 16 * 2**20
 
 
 class TrainStateError(RuntimeError):

@@ -38,10 +38,10 @@ from volsmpl.volume.warm_codes import WARM_MAX_CHANGE
 __all__ = ["CarriedPasses", "check_pass_interval"]
 
 
-def check_pass_interval(every) -> int:
-    """`every` as an int >= 1 (1: the passes at every encoding), else ValueError (one line)."""
+def check_pass_interval(every, name: str = "pass interval") -> int:
+    """`every` as an int >= 1 (1: the passes at every encoding), else ValueError (one line, headed by `name`)."""
     if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-        raise ValueError(f"pass interval {every!r}: give an integer >= 1 (1: the learned passes at every encoding)")
+        raise ValueError(f"{name} {every!r}: give an integer >= 1 (1: the learned passes at every encoding)")
     return every
 
 

@@ -44,10 +44,10 @@ REFINE_SEED = 20260127
 REFINE_WARMUP = 10
 
 
-def check_refine_steps(steps) -> int:
-    """steps as an int >= 0; ValueError (one line) otherwise."""
+def check_refine_steps(steps, name: str = "code refinement steps") -> int:
+    """steps as an int >= 0; ValueError (one line, headed by `name`, e.g. '--refine-steps') otherwise."""
     if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
-        raise ValueError(f"code refinement steps={steps!r}: give an integer >= 0 (0: the encoder's codes as they are).")
+        raise ValueError(f"{name} {steps!r}: give an integer >= 0 (0: the encoder's codes as they are).")
     return steps
 
 

@@ -20,10 +20,11 @@ from volsmpl.volume.warm_codes import WarmCodes
 __all__ = ["CodeRefinementSetting", "check_passes"]
 
 
-def check_passes(passes) -> int | None:
-    """`passes` as None (all the model's learned passes) or an int >= 0, else ValueError (one line)."""
+def check_passes(passes, name: str = "learned passes") -> int | None:
+    """`passes` as None (all the model's learned passes) or an int >= 0, else ValueError (one line, headed by
+    `name`)."""
     if passes is not None and (isinstance(passes, bool) or not isinstance(passes, int) or passes < 0):
-        raise ValueError(f"learned passes {passes!r}: give an integer >= 0 (0: the encoder's codes as they are)")
+        raise ValueError(f"{name} {passes!r}: give an integer >= 0 (0: the encoder's codes as they are)")
     return passes
 
 

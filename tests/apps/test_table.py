@@ -15,7 +15,7 @@ from volsmpl.cli import main as cli_main
 
 ROOT = Path(__file__).resolve().parents[2]
 R3 = str(ROOT / "checkpoints" / "volsmpl_r3" / "ckpt-00057000" / "model")
-SHIPPED = str(ROOT / "core" / "assets" / "volsmpl_anny")
+NO_PASSES = str(ROOT / "checkpoints" / "volsmpl_b8q" / "ckpt-00050000" / "model")   # step 50,000: no learned passes
 
 
 @pytest.mark.parametrize("argv, words", [
@@ -33,7 +33,7 @@ SHIPPED = str(ROOT / "core" / "assets" / "volsmpl_anny")
     (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--pass-every", "2", "--refine-steps", "1",
       "--refine-warm"], ["--pass-every 2", "--refine-warm", "use one of them"]),
     (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--pass-every", "2",
-      "--checkpoint-volsmpl", SHIPPED], ["--pass-every 2", "no learned code-refinement passes"]),
+      "--checkpoint-volsmpl", NO_PASSES], ["--pass-every 2", "no learned code-refinement passes"]),
     (["hoi", "tune", "--pass-every", "2"], ["--pass-every", "does not apply to `volsmpl hoi tune`"]),
     (["selfpen", "--model", "volsmpl", "--cases", "deep_squat", "--passes", "-1"], ["--passes -1", "integer >= 0"]),
     (["motion", "--model", "coap,mesh", "--passes", "1"], ["--passes 1 sets VolumetricSMPL's", "--model coap,mesh"]),
@@ -100,8 +100,8 @@ def test_a_run_with_passes_at_an_interval_records_it(tmp_path):
     (["volsmpl"], R3, (2, None), (1, 4), (2, 4)),                      # given values stay
     (["volsmpl"], R3, (None, 2), (1, 4), (1, 2)),
     (["volsmpl"], R3, (None, None), (0, 4), (0, 1)),                   # no passes run: no interval
-    (["volsmpl"], None, (None, None), (1, 4), (None, 1)),              # the shipped model has none
-    (["volsmpl"], SHIPPED, (None, None), (None, 4), (None, 1)),
+    (["volsmpl"], NO_PASSES, (None, None), (1, 4), (None, 1)),         # a checkpoint without passes runs none
+    (["volsmpl"], NO_PASSES, (None, None), (None, 4), (None, 1)),
     (["coap", "mesh"], None, (None, None), (1, 4), (None, 1)),          # without volsmpl: nothing set
 ])
 def test_an_apps_pass_defaults_follow_the_checkpoint(models, ckpt, given, app, want):

@@ -1,10 +1,11 @@
-"""Training-state folders: files of at most 16 MB, sha256-checked on resume, older folders still read, and a run
+"""Training-state folders: files of at most 16 MiB, sha256-checked on resume, older folders still read, and a run
 that continues exactly from a state written in shards (and on another device, where one is available)."""
 from __future__ import annotations
 
 import json
 import math
 import shutil
+from pathlib import Path
 
 import pytest
 import torch
@@ -15,6 +16,8 @@ from volsmpl.train import state as ts
 from volsmpl.nn.config import VolumeConfig
 from volsmpl.train.loop import WeightEMA, train
 from volsmpl.train.config import TrainConfig
+
+ROOT = Path(__file__).resolve().parents[2]
 
 TINY = VolumeConfig(latent_dim=16, encoder_hidden=16, encoder_blocks=2, n_surface_samples=64, decoder_hidden=16, nbw_rank=2)
 
@@ -33,10 +36,13 @@ def test_shards_respect_the_limit_and_keep_every_tensor():
     assert len(groups) == 4  # t0+t1 (160), t2+t3 (120), t4 (240 alone: above the limit), t5
 
 
-def test_full_size_state_files_stay_under_16_mb(tmp_path):
-    """The shipped VolumetricSMPL configuration with a weight average and Adam's moments: every file <= 16 MB,
-    and reading the folder back restores the weights and moments bit for bit."""
-    cfg_json = json.loads(open(volsmpl.volume.models.ASSETS / "volsmpl_anny.json").read())
+@pytest.mark.parametrize("model_json", [volsmpl.volume.models.ASSETS / "volsmpl_anny.json",
+                                        ROOT / "checkpoints" / "volsmpl_r3" / "ckpt-00057000" / "model.json"])
+def test_full_size_state_files_stay_within_16_mib(tmp_path, model_json):
+    """The shipped VolumetricSMPL configuration, and the one with two learned passes (its model file 16.71 MB), with
+    a weight average and Adam's moments: every file <= 16 MiB, and reading the folder back restores the weights and
+    moments bit for bit."""
+    cfg_json = json.loads(open(model_json).read())
     cfg = TrainConfig.from_dict({**cfg_json["meta"]["training"]["train_config"], "keep_ckpts": 1})
     body = volsmpl.create_body()
     vol = volsmpl.attach_volume(body, pretrained=False, model=cfg.model_kind, config=cfg.model)

@@ -20,9 +20,10 @@ from volsmpl.evaluation.validation_set import query_points, validation_bodies
 
 @pytest.fixture(scope="module")
 def shipped():
-    """A fresh default body with the shipped VolumetricSMPL, and validation body 0's output."""
+    """A fresh default body with the shipped VolumetricSMPL's encoder codes (no learned passes: the refinement
+    starts from the encoder's codes), and validation body 0's output."""
     body = create_body()
-    vol = attach_volume(body)
+    vol = attach_volume(body).set_passes(0)
     params = {k: v[:1] for k, v in validation_bodies(1).items()}
     with torch.no_grad():
         out = body(**params)
@@ -68,7 +69,7 @@ def test_refined_codes_are_closer_to_the_exact_distance(shipped):
 
 def test_refining_some_parts_gives_the_codes_of_refining_all(shipped):
     body, _, params, out = shipped
-    a, b = attach_volume(create_body()), attach_volume(create_body())
+    a, b = attach_volume(create_body()).set_passes(0), attach_volume(create_body()).set_passes(0)
     a.set_code_refinement(8)
     b.set_code_refinement(8)
     with torch.no_grad():
@@ -84,7 +85,7 @@ def test_refining_some_parts_gives_the_codes_of_refining_all(shipped):
 
 def test_point_gradients_match_finite_differences_with_refinement():
     body = create_body().double()
-    vol = attach_volume(body).double()
+    vol = attach_volume(body).set_passes(0).double()
     vol.set_code_refinement(4)
     params = {k: v[:1].double() for k, v in validation_bodies(1).items()}
     with torch.no_grad():
@@ -104,7 +105,7 @@ def test_point_gradients_match_finite_differences_with_refinement():
 
 def test_changing_the_setting_re_encodes(shipped):
     body, _, params, _ = shipped
-    vol = attach_volume(body)
+    vol = attach_volume(body).set_passes(0)
     with torch.no_grad():
         out = body(**params)
     pts = out.vertices[:, ::300] + 0.003
@@ -112,7 +113,7 @@ def test_changing_the_setting_re_encodes(shipped):
         plain = vol.query(out, pts)
         vol.set_code_refinement(6)
         refined = vol.query(out, pts)                         # the cached plain encoding must not answer
-        fresh = attach_volume(create_body()).set_code_refinement(6).query(out, pts)
+        fresh = attach_volume(create_body()).set_passes(0).set_code_refinement(6).query(out, pts)
     assert torch.allclose(refined, fresh, atol=1e-6, rtol=0)
     assert not torch.allclose(refined, plain, atol=1e-5, rtol=0)
 
@@ -152,11 +153,11 @@ def test_coap_refinement_fits_its_occupancy():
 def test_cuda_refinement_matches_the_cpu(shipped):
     body, _, params, out = shipped
     pts = out.vertices[:, ::200] + 0.003
-    cpu = attach_volume(create_body()).set_code_refinement(10)
+    cpu = attach_volume(create_body()).set_passes(0).set_code_refinement(10)
     with torch.no_grad():
         ref = cpu.query(out, pts)
     gbody = create_body().to("cuda")
-    gvol = attach_volume(gbody).set_code_refinement(10)
+    gvol = attach_volume(gbody).set_passes(0).set_code_refinement(10)
     with torch.no_grad():
         gout = gbody(**{k: v.to("cuda") for k, v in params.items()})
         got = gvol.query(gout, pts.to("cuda")).cpu()

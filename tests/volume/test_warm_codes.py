@@ -19,9 +19,10 @@ from volsmpl.volume.warm_codes import WARM_MAX_CHANGE, WARM_WARMUP, WarmCodes
 
 @pytest.fixture(scope="module")
 def setup():
-    """The shipped VolumetricSMPL set to warm refinement (1 step), and validation bodies 0-2's outputs."""
+    """The shipped VolumetricSMPL's encoder codes (no learned passes) set to warm refinement (1 step), and
+    validation bodies 0-2's outputs."""
     body = create_body()
-    vol = attach_volume(body).set_code_refinement(1, warm=True)
+    vol = attach_volume(body).set_passes(0).set_code_refinement(1, warm=True)
     params = validation_bodies(3)
     with torch.no_grad():
         outs = [body(**{k: v[i:i + 1] for k, v in params.items()}) for i in range(3)]

@@ -70,7 +70,9 @@ def test_a_batch_of_cases_fits_each_case_as_alone(kind, two_cases):
     together end where each ends alone (same Adam steps: the losses are summed, Adam is per element)."""
     body, cases = two_cases
     assert len({len(c.contacts) for c in cases}) == 2 or cases[0].category != cases[1].category
-    vol = volsmpl.attach_volume(body, model=kind)
+    # the encoder's codes: the learned passes' batching is tested on their codes (tests/volume/test_passes.py),
+    # where Adam's normalised steps cannot amplify its rounding
+    vol = volsmpl.attach_volume(body, model=kind).set_passes(0)
     # no contact margin: within it the contact's gradient is exactly 0, and Adam's normalised steps turn the float32
     # rounding of what remains (another summation order in a batch) into steps of up to lr (measured with the
     # preset's 1 cm: translations 2.7e-4 apart with volsmpl, rotations 1e-3 with the mesh); what is tested is the
@@ -82,7 +84,9 @@ def test_a_batch_of_cases_fits_each_case_as_alone(kind, two_cases):
         assert r.name == case.name and r.batch == 2 and r.iterations == a.iterations == 12
         for who in ("human", "object"):
             assert r.__dict__[who]["scale"] == pytest.approx(a.__dict__[who]["scale"], rel=1e-4)
-            assert np.allclose(r.__dict__[who]["translation"], a.__dict__[who]["translation"], atol=2e-4)
+            # 0.5 mm: the same rounding with step 50,000's encoder codes leaves the cup 2.7e-4 m apart (1e-8 with
+            # the 33,000-step model's); a case fitted with another's data would be centimetres off
+            assert np.allclose(r.__dict__[who]["translation"], a.__dict__[who]["translation"], atol=5e-4)
             # 1e-3 (0.06 deg): Adam's normalised steps turn the float32 rounding of a near-zero gradient (another
             # summation order in a batch) into steps of up to lr = 2e-3 in the 6D rotation; measured: 7e-4 for the
             # cup against the exact mesh at penetration weight 1e5, 2e-5 with volsmpl, 2e-6 for the chair
