@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Callable
 
 from volsmpl.report import sections as rs
+from volsmpl.report.previous import HEADLINES, previous_table
 from volsmpl.report.import_closure import producer_closure
 from volsmpl.io.outputs import check_writable, write_atomic
 from volsmpl.report.result_check import chain_check, check_for, check_path, write_check
@@ -47,7 +48,9 @@ class Section:
     that exists is read); the first result is the section's main one. commands: result name -> the command that
     produces it. producer: repository paths of the code that writes the results (staleness; with every module
     they import, volsmpl.report.import_closure, and the default body's data files). checkpoints:
-    repository paths of the checkpoints the results may describe (a later change is noted)."""
+    repository paths of the checkpoints the results may describe (a later change is noted). records: (record
+    name, result name, path) of the results kept from the models shipped before (volsmpl.report.previous): shown
+    beside their result where the file exists, never stale, never missing."""
     title: str
     paper: tuple
     producer: tuple
@@ -56,6 +59,7 @@ class Section:
     build: Callable
     figures: tuple = ()
     checkpoints: tuple = ()
+    records: tuple = ()
 
 
 _CKPTS = ("core/assets/volsmpl_anny.safetensors", "core/assets/coap_anny.safetensors")
@@ -77,7 +81,8 @@ def _app(name: str, tables: tuple, title: str, build: Callable = rs.summary_sect
             **(more or {})}
     results = {name: (f"docs/{name}/results.json", f"out/{name}/results.json"), **{k: p for k, (p, _) in more.items()}}
     commands = {name: command or f"volsmpl {name} --out out/{name}", **{k: c for k, (_, c) in more.items()}}
-    return Section(title, tables, (f"apps/{name}",), results, commands, build, figures, _CKPTS)
+    records = ((f"{name}_previous", name, f"docs/{name}/results_previous.json"),)
+    return Section(title, tables, (f"apps/{name}",), results, commands, build, figures, _CKPTS, records)
 
 
 SECTIONS: dict[str, Section] = {
@@ -91,7 +96,9 @@ SECTIONS: dict[str, Section] = {
          "eval_refiner": f"volsmpl eval --checkpoint {_REFINER} --out docs/eval_volsmpl_refiner.json",
          "refiner_cost": f"python docs/scripts/refiner_cost.py --checkpoint {_BASE} {_R1} {_REFINER} "
                          f"--refine-steps 0 1 --out docs/refiner_cost.json"},
-        rs.eval_section, ("docs/surfaces.png", "docs/sdf_slice.png"), _CKPTS + (_REFINER + ".safetensors",)),
+        rs.eval_section, ("docs/surfaces.png", "docs/sdf_slice.png"), _CKPTS + (_REFINER + ".safetensors",),
+        (("eval_volsmpl_previous", "eval_volsmpl", "docs/eval_volsmpl_previous.json"),
+         ("eval_coap_previous", "eval_coap", "docs/eval_coap_previous.json"))),
     "app_cost": Section(
         "Volumetric bodies: cost in the apps", ("3", "4", "5", "6"), ("apps", "tools/app_cost.py"),
         {"app_cost": "docs/app_cost.json"},
@@ -121,6 +128,10 @@ SECTIONS: dict[str, Section] = {
                    more={"motion_paired": ("docs/motion/paired.json", "python -m volsmpl.apps.motion.stats "
                                            "docs/motion/results.json --out docs/motion/paired.json")}),
 }
+
+
+#: the eval section's row labels of its results (volsmpl.report.previous)
+_EVAL_LABELS = {"eval_volsmpl": "VolumetricSMPL", "eval_coap": "COAP"}
 
 
 def result_names(sections: dict | None = None) -> list[str]:
@@ -396,6 +407,13 @@ def build_report(out_path: Path, root: Path = ROOT, overrides: dict | None = Non
         state = "stale" if "stale" in verdicts else ("unknown" if "unknown" in verdicts else "current")
         state += ", some results missing" if None in paths.values() else ""
         summary.append([f"[{sec.title}](#{key})", tables, state, f"`{sec.commands.get(main, '?')}`"])
+        kept = {r: (n, root / p) for r, n, p in sec.records if (root / p).exists()}
+        lines += previous_table(key if key in HEADLINES else main, {n: results.get(n) for n, _ in kept.values()},
+                                {r: load_json(p) for r, (_, p) in kept.items()}, _EVAL_LABELS)
+        for r, (n, p) in kept.items():
+            prov = provenance(load_json(p))
+            rows.append([f"`{r}`", f"[{p.name}]({_link(p, out_dir)})", prov["checkpoint"], prov["device"],
+                         prov["commit"], prov["date"], f"**record** of the models shipped before, beside `{n}`"])
         body += [f'<a id="{key}"></a>', "", head, ""] + lines + [""]
         figs = _figures(sec, results, paths, root)
         if figs:
