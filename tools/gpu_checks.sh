@@ -47,7 +47,7 @@ all)  # the engine's CUDA paths first (tests), then its figures; each step bound
     step pytest_cuda 90 python3 -m pytest -q -m cuda -p no:cacheprovider -ra tests/test_cuda_paths.py \
         tests/volume/engine/test_encode_graph.py tests/volume/engine/test_query_graph.py tests/body/test_partition.py tests/train/test_loop.py tests/train/test_state.py tests/geometry/test_groundtruth.py \
         tests/train/test_contact_training.py tests/volume/test_code_refinement.py
-    step bench_cuda 220 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,coap \
+    step bench_cuda 220 $V bench --device cuda --models volsmpl,volsmpl-encoder,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,coap \
         --batch 1 8 --points 60000 --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody \
         --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
     step bench_cuda_b32 80 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph --batch 32 --points 60000 \
@@ -69,7 +69,7 @@ checks)
     cp "$W"/*.log "$OUT"/ 2>/dev/null
     tar czf "$OUT/checks.tgz" -C "$W" . ;;
 bench)  # each (model, batch) runs in a fresh process (~20 s with CUDA start and profiling): keep the set small
-    step bench_cuda 330 $V bench --device cuda --models volsmpl,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,volsmpl-tf32,volsmpl-dense,coap --batch 1 8 --points 60000 \
+    step bench_cuda 330 $V bench --device cuda --models volsmpl,volsmpl-encoder,volsmpl-eager,volsmpl-qgraph,volsmpl-bf16,volsmpl-tf32,volsmpl-dense,coap --batch 1 8 --points 60000 \
         --repeats 10 --warmup 2 --budget 5 --quick --no-bodybody --out "$OUT/bench_cuda.json" --markdown "$OUT/bench_cuda.md"
     cp "$W/bench_cuda.log" "$OUT"/
     step refine_cost 60 python3 docs/scripts/encoder_draws_timing.py --device cuda --draws 1 4 --refine 0 20 40 80 \

@@ -205,7 +205,8 @@ def build_volume(body, spec: dict):
     optional 'engine' (Volume.engine, default 'lean'), optional 'precision' (Volume.set_precision, default 'full'),
     optional 'one_chunk' (True: every query in one chunk, decoders in their batched one-pass form), optional 'pair_decoder'
     (Volume.pair_decoder; None: the Volume's default), optional 'cuda_graphs' (Volume.cuda_graphs), 'cuda_graph_queries'
-    (Volume.cuda_graph_queries)}: a benchmark variant's `Variant.spec` (volsmpl.bench.variants)."""
+    (Volume.cuda_graph_queries), optional 'passes' (Volume.set_passes; None: all the checkpoint's)}: a benchmark
+    variant's `Variant.spec` (volsmpl.bench.variants)."""
     from volsmpl.volume.attach import attach_volume
 
     if spec.get("checkpoint"):
@@ -219,6 +220,8 @@ def build_volume(body, spec: dict):
         vol.pair_decoder = spec["pair_decoder"]
     vol.cuda_graphs = bool(spec.get("cuda_graphs", True))
     vol.cuda_graph_queries = bool(spec.get("cuda_graph_queries", False))
+    if spec.get("passes") is not None:
+        vol.set_passes(int(spec["passes"]))     # 0: the encoder's codes (any checkpoint, or random weights)
     if spec["dense"] or spec.get("one_chunk"):
         # the published implementations evaluate all (body, part, point) entries in one pass: no chunking,
         # no cache tiling; 'one_chunk' does the same on the sparse path

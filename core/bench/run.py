@@ -1,7 +1,7 @@
 """Resource benchmark of the volumetric body models (paper Table 1 resources, Table 2 costs, Table B.4).
 
     volsmpl bench [--device cpu|cuda] [--batch 1 8] [--points 60000] [--repeats 5] [--threads N]
-                  [--models volsmpl,volsmpl-dense,coap,coap-sparse] [--checkpoint-volsmpl P] [--checkpoint-coap P]
+                  [--models volsmpl,volsmpl-encoder,volsmpl-dense,coap,coap-sparse] [--checkpoint-volsmpl P] [--checkpoint-coap P]
                   [--out bench.json] [--markdown docs/bench_cpu.md] [--quick]
     from volsmpl.bench.run import BenchConfig, run_bench; res = run_bench(BenchConfig(batches=(1,), n_points=2000))
 
@@ -234,21 +234,23 @@ def evaluate_protocol_check(cfg: BenchConfig, checkpoint: Optional[str]) -> dict
     return measure_resources(spec, ecfg)
 
 
-def accuracy(model: str, checkpoint: Optional[str], cfg: BenchConfig, precision: str = "full") -> dict:
-    """IoU/MSE of a trained base model on the validation set (its decoders in `precision`); {'status':
-    'untrained'} without a checkpoint."""
+def accuracy(model: str, checkpoint: Optional[str], cfg: BenchConfig, precision: str = "full",
+             passes: Optional[int] = None) -> dict:
+    """IoU/MSE of a trained base model on the validation set (its decoders in `precision`, the first `passes` of
+    its learned passes; None: all); {'status': 'untrained'} without a checkpoint."""
     from volsmpl.volume.models import checkpoint_model
     from volsmpl.evaluation import EvalConfig, evaluate_checkpoint
 
     if checkpoint is None:
         return {"status": "untrained"}
-    ecfg = EvalConfig(n_bodies=cfg.n_bodies, n_points=cfg.n_points, device=cfg.device, precision=precision)
+    ecfg = EvalConfig(n_bodies=cfg.n_bodies, n_points=cfg.n_points, device=cfg.device, precision=precision,
+                      passes=passes)
     held = checkpoint_model(checkpoint)
     if held != model:
         raise ValueError(f"{checkpoint} holds a {held} model, not {model}; pass it as --checkpoint-{held}")
     res = evaluate_checkpoint(checkpoint, config=ecfg)  # occupancy models: IoU only (MSE None)
     return {"status": "trained", "checkpoint": checkpoint, "metrics": res.metrics, "n_bodies": cfg.n_bodies,
-            "validation_digest": res.validation_digest, "precision": precision}
+            "validation_digest": res.validation_digest, "precision": precision, "passes": passes}
 
 
 # ---------------------------------------------------------------------------------------------- run
@@ -339,15 +341,16 @@ def run_bench(cfg: BenchConfig, log=print) -> dict:
             log("body-body occupancy (winding numbers vs volsmpl) ...")
             result["bodybody"] = bench_bodybody(cfg, body, ckpts["volsmpl"])
     result["accuracy"] = {}
-    reduced = [n for n in cfg.models
-               if VARIANTS[n].precision != "full" and result["models"].get(n, {}).get("status") == "ok"]
-    for key, base, precision in [(b, b, "full") for b, (ok, _) in available.items() if ok] + \
-            [(n, VARIANTS[n].kind, VARIANTS[n].precision) for n in reduced]:   # reduced precision: its own accuracy
+    own = [n for n in cfg.models if (VARIANTS[n].precision != "full" or VARIANTS[n].passes is not None)
+           and result["models"].get(n, {}).get("status") == "ok"]
+    for key, base, precision, passes in [(b, b, "full", None) for b, (ok, _) in available.items() if ok] + \
+            [(n, VARIANTS[n].kind, VARIANTS[n].precision, VARIANTS[n].passes) for n in own]:
+        # a variant in a reduced precision, or with its own number of learned passes, has its own accuracy
         if not cfg.accuracy:
             result["accuracy"][key] = {"status": "skipped (--quick)"}
         else:
             log(f"{key} accuracy ...")
-            result["accuracy"][key] = accuracy(base, ckpts[base], cfg, precision)
+            result["accuracy"][key] = accuracy(base, ckpts[base], cfg, precision, passes)
     result["ratios"] = compute_ratios(result["models"], result.get("bodybody"))
     result["notes"] += caveats(result)
     return result

@@ -101,7 +101,7 @@ def model_rows(result: dict) -> Tuple[List[str], List[List[str]]]:
             rows.append([name, "-", "skipped"] + [""] * (len(head) - 3))
             continue
         accs = result.get("accuracy", {})
-        acc = accs.get(name, accs.get(e["model"]))   # a reduced-precision model has its own
+        acc = accs.get(name, accs.get(e["model"]))   # a reduced-precision or passes variant has its own
         skipped = e.get("skipped_batches", {})
         for batch in sorted(set(e["batches"]) | set(skipped), key=int):
             if batch in skipped:

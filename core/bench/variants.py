@@ -42,6 +42,8 @@ class Variant:
         cuda_graph_queries: `Volume.cuda_graph_queries` (replay the no-grad lean query from a CUDA graph on a GPU).
         cuda_only: why the variant runs on CUDA only: off CUDA it is skipped with this note. '' runs anywhere.
         default: measured when `--models` is not given.
+        passes: `Volume.set_passes`: None runs all the checkpoint's learned code-refinement passes, 0 the
+            encoder's codes alone (the paper's model). A variant that sets it has its own accuracy row.
     """
 
     kind: str
@@ -56,6 +58,7 @@ class Variant:
     cuda_graph_queries: bool = False
     cuda_only: str = ""
     default: bool = False
+    passes: Optional[int] = None
 
     @property
     def volume_kwargs(self) -> Dict[str, object]:
@@ -72,7 +75,7 @@ class Variant:
         return {"model": self.kind, "dense": self.dense, "checkpoint": checkpoint, "init_seed": init_seed,
                 "engine": self.engine, "precision": self.precision, "one_chunk": self.one_chunk,
                 "pair_decoder": self.pair_decoder, "cuda_graphs": self.cuda_graphs,
-                "cuda_graph_queries": self.cuda_graph_queries}
+                "cuda_graph_queries": self.cuda_graph_queries, "passes": self.passes}
 
 
 #: benchmark variant name -> Variant, in the order `--models` lists them
@@ -81,7 +84,12 @@ VARIANTS: Dict[str, Variant] = {
         "volsmpl", "VolumetricSMPL (sparse)",
         "the sparse engine with the Volume's defaults: the lean query (decoders only on the (point, part) pairs "
         "inside part boxes), cache-sized chunks on the CPU (one body per chunk at 60k points), the no-grad encode "
-        "replayed from a CUDA graph on a GPU", default=True),
+        "replayed from a CUDA graph on a GPU where no learned pass runs, all the checkpoint's learned passes",
+        default=True),
+    "volsmpl-encoder": Variant(
+        "volsmpl", "VolumetricSMPL, the encoder's codes",
+        "the sparse engine with the encoder's codes alone, no learned passes: the paper's model", passes=0,
+        default=True),
     "volsmpl-dense": Variant(
         "volsmpl", "VolumetricSMPL, dense",
         "the paper's implementation: every part decoder on every point, in one pass", dense=True, default=True),
@@ -132,4 +140,5 @@ RATIO_PAIRS: List[Tuple[str, str]] = [
     ("coap", "volsmpl"), ("coap-sparse", "volsmpl"), ("volsmpl-dense", "volsmpl"), ("coap", "coap-sparse"),
     ("volsmpl-chunked", "volsmpl"), ("volsmpl", "volsmpl-bf16"), ("volsmpl", "volsmpl-tf32"),
     ("coap", "volsmpl-bf16"), ("coap", "volsmpl-tf32"), ("volsmpl-onechunk", "volsmpl"),
-    ("volsmpl-eager", "volsmpl"), ("volsmpl", "volsmpl-qgraph"), ("coap", "volsmpl-qgraph")]
+    ("volsmpl-eager", "volsmpl"), ("volsmpl", "volsmpl-qgraph"), ("coap", "volsmpl-qgraph"),
+    ("coap", "volsmpl-encoder"), ("volsmpl", "volsmpl-encoder")]

@@ -108,10 +108,11 @@ SECTIONS: dict[str, Section] = {
         "Volumetric bodies: time and memory; winding numbers", ("1", "C.4"),
         ("core/bench", "core/runtime/meter.py"),
         {"bench": "docs/bench_cpu.json", "bench_cuda": "docs/bench_cuda.json"},
-        {"bench": "volsmpl bench --threads 1 --models volsmpl,volsmpl-grouped,volsmpl-onechunk,volsmpl-dense,coap,"
-                  "coap-sparse --out docs/bench_cpu.json --markdown docs/bench_cpu.md",
-         "bench_cuda": "volsmpl bench --device cuda --models volsmpl,volsmpl-dense,coap --batch 1 8 --repeats 10 "
-                       "--budget 5 --quick --no-bodybody --out docs/bench_cuda.json --markdown docs/bench_cuda.md"},
+        {"bench": "volsmpl bench --threads 1 --models volsmpl,volsmpl-encoder,volsmpl-grouped,volsmpl-onechunk,"
+                  "volsmpl-dense,coap,coap-sparse --out docs/bench_cpu.json --markdown docs/bench_cpu.md",
+         "bench_cuda": "volsmpl bench --device cuda --models volsmpl,volsmpl-encoder,volsmpl-dense,coap --batch 1 8 "
+                       "--repeats 10 --budget 5 --quick --no-bodybody --out docs/bench_cuda.json --markdown "
+                       "docs/bench_cuda.md"},
         rs.bench_section, (), _CKPTS),
     "selfpen": _app("selfpen", ("6",), "Self-intersection repair", rs.selfpen_section,
                     "volsmpl selfpen --model volsmpl,coap,mesh --out out/selfpen",

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -190,6 +191,20 @@ def test_reduced_precision_models(tmp_path):
     if ckpt is not None:
         acc = accuracy("volsmpl", ckpt, cfg, "bf16")
         assert acc["precision"] == "bf16" and 0.5 < acc["metrics"]["iou_mean"] <= 1.0
+
+
+def test_the_accuracy_of_a_variant_with_its_own_passes():
+    """A variant with its own number of learned passes has its own accuracy: volsmpl_r3 with none is step 50,000
+    (the same encoder and decoders), with all of them its own."""
+    from volsmpl.bench.run import accuracy
+
+    ckpts = Path(__file__).resolve().parents[2] / "checkpoints"
+    r3, base = (str(ckpts / d / "model") for d in ("volsmpl_r3/ckpt-00057000", "volsmpl_b8q/ckpt-00050000"))
+    cfg = BenchConfig(n_bodies=1, n_points=3000)
+    none, plain = accuracy("volsmpl", r3, cfg, passes=0), accuracy("volsmpl", base, cfg)
+    both = accuracy("volsmpl", r3, cfg)
+    assert none["passes"] == 0 and both["passes"] is None
+    assert none["metrics"] == plain["metrics"] and none["metrics"]["iou_mean"] != both["metrics"]["iou_mean"]
 
 
 def test_one_chunk_model_has_operator_calls_independent_of_batch():

@@ -17,22 +17,23 @@ BENCH_DIR = Path(bench.__file__).resolve().parent
 BIG = 1 << 62   # the chunk budget of a one-pass query
 
 #: name -> (kind, dense, engine, precision, pair_decoder (None: the Volume's default), one pass, cuda_graphs,
-#: cuda_graph_queries, CUDA only), in the order `--models` lists them
+#: cuda_graph_queries, CUDA only, learned passes (None: all the checkpoint's)), in the order `--models` lists them
 EXPECTED = {
-    "volsmpl": ("volsmpl", False, "lean", "full", None, False, True, False, False),
-    "volsmpl-dense": ("volsmpl", True, "lean", "full", None, True, True, False, False),
-    "coap": ("coap", True, "lean", "full", None, True, True, False, False),
-    "coap-sparse": ("coap", False, "lean", "full", None, False, True, False, False),
-    "volsmpl-chunked": ("volsmpl", False, "chunked", "full", None, False, True, False, False),
-    "volsmpl-bf16": ("volsmpl", False, "lean", "bf16", None, False, True, False, False),
-    "volsmpl-tf32": ("volsmpl", False, "lean", "tf32", None, False, True, False, True),
-    "volsmpl-onechunk": ("volsmpl", False, "lean", "full", None, True, True, False, False),
-    "volsmpl-tiles": ("volsmpl", False, "lean", "full", "tiles", False, True, False, False),
-    "volsmpl-grouped": ("volsmpl", False, "lean", "full", "grouped", False, True, False, False),
-    "volsmpl-eager": ("volsmpl", False, "lean", "full", None, False, False, False, False),
-    "volsmpl-qgraph": ("volsmpl", False, "lean", "full", None, False, True, True, False),
+    "volsmpl": ("volsmpl", False, "lean", "full", None, False, True, False, False, None),
+    "volsmpl-encoder": ("volsmpl", False, "lean", "full", None, False, True, False, False, 0),
+    "volsmpl-dense": ("volsmpl", True, "lean", "full", None, True, True, False, False, None),
+    "coap": ("coap", True, "lean", "full", None, True, True, False, False, None),
+    "coap-sparse": ("coap", False, "lean", "full", None, False, True, False, False, None),
+    "volsmpl-chunked": ("volsmpl", False, "chunked", "full", None, False, True, False, False, None),
+    "volsmpl-bf16": ("volsmpl", False, "lean", "bf16", None, False, True, False, False, None),
+    "volsmpl-tf32": ("volsmpl", False, "lean", "tf32", None, False, True, False, True, None),
+    "volsmpl-onechunk": ("volsmpl", False, "lean", "full", None, True, True, False, False, None),
+    "volsmpl-tiles": ("volsmpl", False, "lean", "full", "tiles", False, True, False, False, None),
+    "volsmpl-grouped": ("volsmpl", False, "lean", "full", "grouped", False, True, False, False, None),
+    "volsmpl-eager": ("volsmpl", False, "lean", "full", None, False, False, False, False, None),
+    "volsmpl-qgraph": ("volsmpl", False, "lean", "full", None, False, True, True, False, None),
 }
-DEFAULT_MODELS = ("volsmpl", "volsmpl-dense", "coap", "coap-sparse")
+DEFAULT_MODELS = ("volsmpl", "volsmpl-encoder", "volsmpl-dense", "coap", "coap-sparse")
 
 
 def _parser():
@@ -43,11 +44,10 @@ def _parser():
 
 def test_table_holds_the_variants_in_order_with_their_settings():
     assert list(VARIANTS) == list(EXPECTED)
-    for name, (kind, dense, engine, precision, pair_decoder, one_pass, graphs, qgraphs, cuda_only) in EXPECTED.items():
+    for name, expected in EXPECTED.items():
         v = VARIANTS[name]
         assert (v.kind, v.dense, v.engine, v.precision, v.pair_decoder, v.dense or v.one_chunk, v.cuda_graphs,
-                v.cuda_graph_queries, bool(v.cuda_only)) == \
-            (kind, dense, engine, precision, pair_decoder, one_pass, graphs, qgraphs, cuda_only), name
+                v.cuda_graph_queries, bool(v.cuda_only), v.passes) == expected, name
         assert v.label and v.note, name
     with pytest.raises(AttributeError):   # frozen: one table, not a per-run copy to edit
         VARIANTS["volsmpl"].engine = "chunked"
@@ -65,7 +65,7 @@ def test_models_option_accepts_exactly_the_table():
     assert bench.BenchConfig().models == DEFAULT_MODELS
     for other in ("volsmpl-graphs", "mesh", "leap", "VOLSMPL"):
         with pytest.raises(ValueError, match=r"unknown model\(s\) \['" + other + r"'\]; choose from \['volsmpl', "
-                                             r"'volsmpl-dense', 'coap', 'coap-sparse', 'volsmpl-chunked'"):
+                                             r"'volsmpl-encoder', 'volsmpl-dense', 'coap', 'coap-sparse'"):
             bench.config_from_args(parser.parse_args(["bench", "--models", other]))
 
 
@@ -81,7 +81,7 @@ def test_ratio_pairs_name_variants_of_the_table():
                            ("coap", "coap-sparse"), ("volsmpl-chunked", "volsmpl"), ("volsmpl", "volsmpl-bf16"),
                            ("volsmpl", "volsmpl-tf32"), ("coap", "volsmpl-bf16"), ("coap", "volsmpl-tf32"),
                            ("volsmpl-onechunk", "volsmpl"), ("volsmpl-eager", "volsmpl"), ("volsmpl", "volsmpl-qgraph"),
-                           ("coap", "volsmpl-qgraph")]
+                           ("coap", "volsmpl-qgraph"), ("coap", "volsmpl-encoder"), ("volsmpl", "volsmpl-encoder")]
     from volsmpl.bench import summary
     assert summary.RATIO_PAIRS is RATIO_PAIRS
 
@@ -91,8 +91,9 @@ def _tile_rows(vol):
     return (vol.net.decoder if hasattr(vol.net, "decoder") else vol.net).TILE_ROWS
 
 
-def _check_volume(vol, name):
-    kind, dense, engine, precision, pair_decoder, one_pass, graphs, qgraphs, _ = EXPECTED[name]
+def _check_volume(vol, name, built: bool = True):
+    kind, dense, engine, precision, pair_decoder, one_pass, graphs, qgraphs, _, passes = EXPECTED[name]
+    assert not built or vol.passes == passes      # set by build_volume (Volume's constructor does not take it)
     assert vol.kind == kind and vol.dense is dense and vol.engine == engine and vol.precision == precision
     assert vol.pair_decoder == (pair_decoder or "tiles")      # the Volume's default pair decoder is 'tiles'
     assert vol.cuda_graphs is graphs and vol.cuda_graph_queries is qgraphs
@@ -112,8 +113,8 @@ def test_volume_kwargs_give_that_volume(name):
         else:
             assert hasattr(vol, key), key
             setattr(vol, key, value)
-    _check_volume(vol, name)
-    _check_volume(Volume(vol.net, vol.partition, vol.fingerprint, **v.volume_kwargs), name)
+    _check_volume(vol, name, built=False)
+    _check_volume(Volume(vol.net, vol.partition, vol.fingerprint, **v.volume_kwargs), name, built=False)
 
 
 @pytest.mark.parametrize("name", list(EXPECTED))

@@ -351,3 +351,14 @@ def test_the_learned_refinement_row_and_its_cost(tmp_path):
             "40.00 ms, step 100.0 ms; runs/r/model (2 passes): encode 80.00 ms, step 125.0 ms; runs/q/model (1 pass): "
             "encode 60.00 ms, step 110.0 ms; base (0 passes, 1 refinement step per encoding): encode 70.00 ms, step "
             "130.0 ms.") in ev
+
+
+def test_the_bench_ratio_of_the_papers_model_form_beside_the_papers(tmp_path):
+    """With learned passes shipped, COAP as published against the encoder's codes (the paper's model) is the
+    paper's ratio's counterpart: both ratios shown, each beside the paper's 140 / 15 ms and 18.7 / 3.1 GB."""
+    ratios = {"coap/volsmpl": {"1": {"time": 3.0, "time_query": 4.0, "mem": 20.0}},
+              "coap/volsmpl-encoder": {"1": {"time": 6.0, "time_query": 4.5, "mem": 21.0}}}
+    res = write(tmp_path / "bench.json", {"models": {}, "ratios": ratios, "meta": {"cpu": "test cpu"}})
+    text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"bench": res}, git=NoGit())
+    assert "| coap/volsmpl (cpu), B = 1 | 3.00 | 4.00 | 20.00 | 9.3 | 6.0 |" in text
+    assert "| coap/volsmpl-encoder (cpu), B = 1 | 6.00 | 4.50 | 21.00 | 9.3 | 6.0 |" in text

@@ -88,6 +88,7 @@ def test_accessors():
     b = paper.bench_paper()
     assert b["volsmpl"] == {"t_ms": 15.0, "mem_gb": 3.1} and b["winding_bodybody"] == {"t_ms": 464.41, "mem_gb": 15.58}
     assert b["ratios"]["coap/volsmpl"]["time"] == pytest.approx(140 / 15)
+    assert b["ratios"]["coap/volsmpl-encoder"] == {"time": pytest.approx(140 / 15), "mem": pytest.approx(18.7 / 3.1)}
     with pytest.raises(KeyError, match="no paper table"):
         paper.table("B.4")
     with pytest.raises(KeyError, match="no row"):
