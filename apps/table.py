@@ -84,15 +84,17 @@ def add_common(p, *, out: str | None, model: str = "volsmpl,coap,mesh", none: bo
     p.add_argument("--refine-warm", action="store_true",
                    help="with --refine-steps R: each encoding continues the same bodies' refinement from the "
                         "previous iteration of the fit (volsmpl.volume.warm_codes), R steps per iteration")
-    p.add_argument("--passes", type=int, default=None,
+    default_passes = ("all it has" if passes is None else "0" if passes == 0
+                      else f"{passes}, or all it has if fewer")
+    p.add_argument("--passes", type=int, default=None, metavar="P",
                    help="with a VolumetricSMPL checkpoint that has learned code-refinement passes: run only the first "
-                        "P of them at each encoding (0: the encoder's codes as they are; default: "
-                        + ("all it has)" if passes is None else f"{passes}, or all it has if fewer)"))
-    p.add_argument("--pass-every", type=int, default=None,
+                        f"P of them at each encoding (0: the encoder's codes as they are; default: {default_passes})")
+    p.add_argument("--pass-every", type=int, default=None, metavar="N",
                    help="with a VolumetricSMPL checkpoint that has learned code-refinement passes: run them at every "
                         "N-th iteration of a fit and add their correction to the encoder's codes of the iterations "
-                        f"between (volsmpl.volume.carried_passes; default {pass_every} where passes run, else 1; "
-                        "1: at every encoding)")
+                        "between (volsmpl.volume.carried_passes; "
+                        + ("default 1: at every encoding)" if pass_every == 1
+                           else f"default {pass_every} where passes run, else 1; 1: at every encoding)"))
     p.set_defaults(app_passes=passes, app_pass_every=pass_every)
 
 
