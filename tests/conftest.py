@@ -80,6 +80,25 @@ def random_pose(B: int, scale: float = 0.4, seed: int = 0, dtype=torch.float32, 
     )
 
 
+class NoGit:
+    """`volsmpl report`'s git queries where git is unavailable (volsmpl.report.build.Git's interface)."""
+    available, reason = False, "no git in this test"
+
+    def head(self):
+        return None
+
+
+def write_result(path, data):
+    """`data` (a dict as JSON, or text as it is) written to `path`, its folders made; returns the path."""
+    import json
+    from pathlib import Path
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data) if not isinstance(data, str) else data)
+    return path
+
+
 def git_run(repo, *args, date: str | None = None) -> str:
     """Run git in `repo` with a fixed author (and commit date when given); its stdout, stripped."""
     import os

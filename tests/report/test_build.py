@@ -6,22 +6,12 @@ from pathlib import Path
 
 import pytest
 
-from conftest import git_run, producer_repo
+from conftest import NoGit, git_run, producer_repo, write_result
 from volsmpl.report import build as report
 from volsmpl.cli import main
 
 
-class NoGit:
-    available, reason = False, "no git in this test"
 
-    def head(self):
-        return None
-
-
-def write(path: Path, data) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data) if not isinstance(data, str) else data)
-    return path
 
 
 HOI = {"summary": {"volsmpl": {"iter_ms": 12.5, "total_min": 0.2, "collision_pct": 4.1, "contact_cm": 3.3,
@@ -33,9 +23,9 @@ HOI = {"summary": {"volsmpl": {"iter_ms": 12.5, "total_min": 0.2, "collision_pct
 
 
 def test_app_table_beside_the_paper_and_missing_ones_listed(tmp_path):
-    write(tmp_path / "out" / "hoi" / "results.json", HOI)
+    write_result(tmp_path / "out" / "hoi" / "results.json", HOI)
     (tmp_path / "out" / "hoi" / "fig.png").write_bytes(b"png")
-    write(tmp_path / "docs" / "eval_coap_anny.json", {"metrics": {"iou_mean": 0.5, "iou_surf": 0.4, "iou_unif": 0.6},
+    write_result(tmp_path / "docs" / "eval_coap_anny.json", {"metrics": {"iou_mean": 0.5, "iou_surf": 0.4, "iou_unif": 0.6},
                                                      "config": {"device": "cpu"}})
     text, status = report.build_report(tmp_path / "docs" / "report.md", root=tmp_path, git=NoGit())
     hoi = text[text.index("## Human-object"):]
@@ -62,7 +52,7 @@ def test_app_table_beside_the_paper_and_missing_ones_listed(tmp_path):
 
 
 def test_motion_back_ends_split_over_tables_5_and_d1(tmp_path):
-    res = write(tmp_path / "m.json", {"summary": {"volsmpl": {"frame_ms": 9.0}, "coap_w0.01": {"frame_ms": 70.0}}})
+    res = write_result(tmp_path / "m.json", {"summary": {"volsmpl": {"frame_ms": 9.0}, "coap_w0.01": {"frame_ms": 70.0}}})
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"motion": res}, git=NoGit())
     t5 = text[text.index("Paper Table 5"):text.index("Paper Table D.1")]
     d1 = text[text.index("Paper Table D.1"):]
@@ -79,22 +69,22 @@ PAIRED = {"confidence": 0.95, "method": "BCa bootstrap of the mean difference", 
 
 
 def test_motion_paired_differences_from_their_file_or_the_result(tmp_path):
-    res = write(tmp_path / "m.json", {"summary": {"volsmpl": {"frame_ms": 9.0}}})
-    pair = write(tmp_path / "p.json", PAIRED)
+    res = write_result(tmp_path / "m.json", {"summary": {"volsmpl": {"frame_ms": 9.0}}})
+    pair = write_result(tmp_path / "p.json", PAIRED)
     row = "| volsmpl - coap (w 0.01) | collision_cm | 0.180 | 0.310 | -0.13 [-0.18, -0.08] | 81% / 10% | 80 |"
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"motion": res, "motion_paired": pair},
                                   git=NoGit())
     assert row in text and "95% interval" in text
-    res = write(tmp_path / "m2.json", {"summary": {"volsmpl": {"frame_ms": 9.0}}, "paired": PAIRED})
+    res = write_result(tmp_path / "m2.json", {"summary": {"volsmpl": {"frame_ms": 9.0}}, "paired": PAIRED})
     text, status = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"motion": res}, git=NoGit())
     assert row in text and "motion_paired" in status["missing"]
-    res = write(tmp_path / "m3.json", {"summary": {"volsmpl": {"frame_ms": 9.0}}})
+    res = write_result(tmp_path / "m3.json", {"summary": {"volsmpl": {"frame_ms": 9.0}}})
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"motion": res}, git=NoGit())
     assert "Paired over the same cases" not in text
 
 
 def test_paper_mismatch_is_noted(tmp_path):
-    res = write(tmp_path / "s.json", {"summary": {"volsmpl": {"step_ms": 1.0}},
+    res = write_result(tmp_path / "s.json", {"summary": {"volsmpl": {"step_ms": 1.0}},
                                       "paper": {"volsmpl": {"step_ms": 15.0}}})
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"selfpen": res}, git=NoGit())
     assert "volsmpl.step_ms: 15.0 (paper: 14)" in text
@@ -110,7 +100,7 @@ def repo(tmp_path):
 
 
 def _verdict(root: Path, data: dict | None = None) -> tuple[str, str]:
-    over = {"hoi": write(root / "x" / "r.json", data)} if data is not None else {}
+    over = {"hoi": write_result(root / "x" / "r.json", data)} if data is not None else {}
     text, status = report.build_report(root / "r.md", root=root, overrides=over)
     line = next(ln for ln in text.splitlines() if ln.startswith("| `hoi` |"))
     return ("stale" if "hoi" in status["stale"] else "unknown" if "hoi" in status["unknown"] else "current"), line
@@ -151,7 +141,7 @@ def test_stale_when_core_code_the_app_imports_changed(tmp_path):
 
 
 def test_git_unavailable_is_said_not_guessed(tmp_path):
-    write(tmp_path / "docs" / "hoi" / "results.json", HOI)
+    write_result(tmp_path / "docs" / "hoi" / "results.json", HOI)
     text, status = report.build_report(tmp_path / "r.md", root=tmp_path, git=report.Git(tmp_path / "nowhere"))
     assert status["unknown"] == ["hoi"] and status["stale"] == []
     assert "**unknown**: not checked: git unavailable (" in text
@@ -162,7 +152,7 @@ def test_cli_user_errors_one_line_exit_2(tmp_path, capsys):
     assert main(["report", "--results", f"hoi={tmp_path / 'missing.json'}", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "file not found" in err and err.startswith("volsmpl report: error:")
-    bad = write(tmp_path / "bad.json", "{not json")
+    bad = write_result(tmp_path / "bad.json", "{not json")
     assert main(["report", "--results", f"egohmr={bad}", "--out", str(out)]) == 2
     assert "cannot read result JSON" in capsys.readouterr().err
     assert main(["report", "--results", f"nosuch={bad}", "--out", str(out)]) == 2
@@ -178,7 +168,7 @@ def test_check_exit_code_and_atomic_write(tmp_path, monkeypatch):
     assert [p.name for p in out.parent.iterdir()] == ["report.md"]  # no temporary file left behind
     one = {"hoi": report.SECTIONS["hoi"]}
     monkeypatch.setattr(report, "SECTIONS", one)
-    res = write(tmp_path / "h.json", HOI)
+    res = write_result(tmp_path / "h.json", HOI)
     assert main(["report", "--out", str(out), "--check", "--results", f"hoi={res}"]) == 0  # no git: not stale
 
 
@@ -193,7 +183,7 @@ def test_real_results_render_if_present():
 
 
 def test_a_result_of_another_layout_does_not_stop_the_report(tmp_path):
-    res = write(tmp_path / "e.json", {"metrics": [1, 2], "config": "x"})
+    res = write_result(tmp_path / "e.json", {"metrics": [1, 2], "config": "x"})
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"eval_volsmpl": res}, git=NoGit())
     assert "Could not tabulate these results (AttributeError" in text and "| `eval_volsmpl` |" in text
 
@@ -203,16 +193,16 @@ def test_checkpoint_note_names_only_the_checkpoint_a_result_describes(repo):
     (and an eval that records no checkpoint is, as before, checked against both)."""
     root, first, second = repo
     for stem in ("volsmpl_anny", "coap_anny"):
-        write(root / "core" / "assets" / f"{stem}.safetensors", "v1")
+        write_result(root / "core" / "assets" / f"{stem}.safetensors", "v1")
     git_run(root, "add", ".")
     git_run(root, "commit", "-q", "-m", "ship both", date="2026-01-03T00:00:00+00:00")
     made = git_run(root, "rev-parse", "--short", "HEAD")
-    write(root / "core" / "assets" / "coap_anny.safetensors", "v2")
+    write_result(root / "core" / "assets" / "coap_anny.safetensors", "v2")
     git_run(root, "commit", "-q", "-am", "ship a new coap", date="2026-01-04T00:00:00+00:00")
     metrics = {"metrics": {"iou_mean": 0.9, "iou_surf": 0.85, "iou_unif": 0.95}, "meta": {"git_commit": made}}
 
     def row(extra: dict) -> str:
-        res = write(root / "x" / "eval.json", {**metrics, "extra": extra})
+        res = write_result(root / "x" / "eval.json", {**metrics, "extra": extra})
         text, _ = report.build_report(root / "r.md", root=root, overrides={"eval_volsmpl": res})
         return next(ln for ln in text.splitlines() if ln.startswith("| `eval_volsmpl` |"))
 
@@ -225,9 +215,9 @@ def test_checkpoint_note_names_only_the_checkpoint_a_result_describes(repo):
 
 def test_eval_section_states_the_sampling_of_each_result(tmp_path):
     """The eval section says where each result's points lie (older JSONs, without the key, used the body box)."""
-    write(tmp_path / "docs" / "eval_volsmpl_anny.json", {"metrics": {"iou_mean": 0.9, "iou_surf": 0.85, "iou_unif": 0.95},
+    write_result(tmp_path / "docs" / "eval_volsmpl_anny.json", {"metrics": {"iou_mean": 0.9, "iou_surf": 0.85, "iou_unif": 0.95},
           "config": {"n_bodies": 64, "n_points": 60000, "sampling": "parts", "surface_sigma": 0.02}})
-    write(tmp_path / "docs" / "eval_coap_anny.json", {"metrics": {"iou_mean": 0.8, "iou_surf": 0.7, "iou_unif": 0.9},
+    write_result(tmp_path / "docs" / "eval_coap_anny.json", {"metrics": {"iou_mean": 0.8, "iou_surf": 0.7, "iou_unif": 0.9},
           "config": {"n_bodies": 64, "n_points": 60000, "surface_sigma": 0.01}})
     text, _ = report.build_report(tmp_path / "docs" / "report.md", root=tmp_path, git=NoGit())
     assert "- VolumetricSMPL: 64 validation bodies, 60,000 points each (parts sampling, near-surface offsets 0.020 m)" in text
@@ -239,7 +229,7 @@ def test_wide_summaries_keep_the_paper_columns_first_and_tables_at_most_ten_colu
     """A summary with many measures: the paper's columns first, then ours up to ten columns a table; the rest in
     further tables of our rows, every measure shown once."""
     extra = {f"m{i:02d}": float(i) for i in range(15)}
-    res = write(tmp_path / "h.json", {"summary": {"volsmpl": {"iter_ms": 12.5, **extra}}})
+    res = write_result(tmp_path / "h.json", {"summary": {"volsmpl": {"iter_ms": 12.5, **extra}}})
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"hoi": res}, git=NoGit())
     hoi = text[text.index("## Human-object"):text.index("Sources:", text.index("## Human-object"))]
     tables = [ln for ln in hoi.splitlines() if ln.startswith("| row")]
@@ -256,13 +246,13 @@ def test_a_result_of_another_app_is_refused_for_a_section(tmp_path, capsys):
     names its app, and the report refuses it for another app's section in one line (before writing anything)."""
     from volsmpl.cli import main
 
-    other = write(tmp_path / "selfpen" / "results.json", {"app": "selfpen", "summary": {"volsmpl": {"step_ms": 1.0}}})
+    other = write_result(tmp_path / "selfpen" / "results.json", {"app": "selfpen", "summary": {"volsmpl": {"step_ms": 1.0}}})
     out = tmp_path / "r.md"
     assert main(["report", "--out", str(out), "--results", f"hoi={other}"]) == 2
     err = capsys.readouterr().err.strip()
     assert "is a results.json of `volsmpl selfpen`, not of `volsmpl hoi`" in err and "\n" not in err
     assert not out.exists()
-    own = write(tmp_path / "hoi" / "results.json", {"app": "hoi", "summary": {"volsmpl": {"iter_ms": 1.0}}})
+    own = write_result(tmp_path / "hoi" / "results.json", {"app": "hoi", "summary": {"volsmpl": {"iter_ms": 1.0}}})
     assert report.parse_overrides([f"hoi={own}", f"selfpen={other}"]) == {"hoi": own, "selfpen": other}
 
 
@@ -271,7 +261,7 @@ def test_selfpen_section_reads_the_preset_of_either_layout(tmp_path):
     summary = {"volsmpl": {"step_ms": 50.0, "collisions_after": 200.0}}
     for i, data in enumerate(({"preset": "paper", "summary": summary},
                               {"app": "selfpen", "config": {"preset": "paper", "seed": 0}, "summary": summary})):
-        res = write(tmp_path / f"s{i}.json", data)
+        res = write_result(tmp_path / f"s{i}.json", data)
         text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"selfpen": res}, git=NoGit())
         assert "Ours: preset paper," in text
 
@@ -298,7 +288,7 @@ def test_hoi_medians_per_kind_from_the_apps_own_summaries(tmp_path):
     assert s["contact_cm_median"] == 3.0 and s["obj_rot_err_deg"] == pytest.approx(70 / 3)
     assert kinds["cup"]["obj_rot_err_deg_median"] == 15.0 and kinds["cup"]["worse_rotation"] == 1
     assert kinds["chair"]["worse_rotation"] == 1 and kinds["ball"]["obj_rot_err_deg_median"] is None
-    res = write(tmp_path / "h.json", {"summary": {"volsmpl": s}, "by_kind": {"volsmpl": kinds}, "cases": {}})
+    res = write_result(tmp_path / "h.json", {"summary": {"volsmpl": s}, "by_kind": {"volsmpl": kinds}, "cases": {}})
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"hoi": res}, git=NoGit())
     assert "| volsmpl | all | 4 | 15.00 -> 20.00 | 50.00 -> 3.00 | 5.00 -> 5.00 | 1.00 -> 1.00 | 2 |" in text
     assert "| volsmpl | cup | 2 | 13.50 -> 15.00 | 50.00 -> 3.00 |" in text
@@ -320,7 +310,7 @@ def test_egohmr_paired_difference_and_activities_from_the_apps_own_rows(tmp_path
     s_none, s_mesh = summarize(none), summarize(mesh)
     s_mesh["mpjpe_diff_mm"], *ci = paired_interval(mesh, none)
     s_mesh["mpjpe_diff_ci95_mm"] = ci
-    res = write(tmp_path / "e.json", {"app": "egohmr", "summary": {"none": s_none, "mesh": s_mesh},
+    res = write_result(tmp_path / "e.json", {"app": "egohmr", "summary": {"none": s_none, "mesh": s_mesh},
                                       "by_activity": {"none": by_activity(none), "mesh": by_activity(mesh)},
                                       "cases": {}})
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"egohmr": res}, git=NoGit())
@@ -333,11 +323,11 @@ def test_the_learned_refinement_row_and_its_cost(tmp_path):
     """The eval section's row of the checkpoint with learned code refinement (a synthetic eval JSON) sits beside the
     shipped model's, and the cost lines list each checkpoint's encode and step times per batch size, with the
     test-time refinement steps where a row has them."""
-    write(tmp_path / "docs" / "eval_volsmpl_anny.json", {"metrics": {"iou_mean": 0.9, "iou_surf": 0.85, "iou_unif": 0.95}})
-    write(tmp_path / "docs" / "eval_volsmpl_refiner.json", {"metrics": {"iou_mean": 0.925, "iou_surf": 0.89,
+    write_result(tmp_path / "docs" / "eval_volsmpl_anny.json", {"metrics": {"iou_mean": 0.9, "iou_surf": 0.85, "iou_unif": 0.95}})
+    write_result(tmp_path / "docs" / "eval_volsmpl_refiner.json", {"metrics": {"iou_mean": 0.925, "iou_surf": 0.89,
                                                                         "iou_unif": 0.96},
                                                             "extra": {"checkpoint": "runs/r/model"}})
-    write(tmp_path / "docs" / "refiner_cost.json", {"threads": 1, "points": 2000, "rows": [
+    write_result(tmp_path / "docs" / "refiner_cost.json", {"threads": 1, "points": 2000, "rows": [
         {"checkpoint": "base", "B": 1, "refiner_iters": 0, "encode_ms": 40.0, "step_ms": 100.0},
         {"checkpoint": "runs/r/model", "B": 1, "refiner_iters": 2, "encode_ms": 80.0, "step_ms": 125.0},
         {"checkpoint": "runs/q/model", "B": 1, "refiner_iters": 1, "encode_ms": 60.0, "step_ms": 110.0},
@@ -358,7 +348,7 @@ def test_the_bench_ratio_of_the_papers_model_form_beside_the_papers(tmp_path):
     paper's ratio's counterpart: both ratios shown, each beside the paper's 140 / 15 ms and 18.7 / 3.1 GB."""
     ratios = {"coap/volsmpl": {"1": {"time": 3.0, "time_query": 4.0, "mem": 20.0}},
               "coap/volsmpl-encoder": {"1": {"time": 6.0, "time_query": 4.5, "mem": 21.0}}}
-    res = write(tmp_path / "bench.json", {"models": {}, "ratios": ratios, "meta": {"cpu": "test cpu"}})
+    res = write_result(tmp_path / "bench.json", {"models": {}, "ratios": ratios, "meta": {"cpu": "test cpu"}})
     text, _ = report.build_report(tmp_path / "r.md", root=tmp_path, overrides={"bench": res}, git=NoGit())
     assert "| coap/volsmpl (cpu), B = 1 | 3.00 | 4.00 | 20.00 | 9.3 | 6.0 |" in text
     assert "| coap/volsmpl-encoder (cpu), B = 1 | 6.00 | 4.50 | 21.00 | 9.3 | 6.0 |" in text

@@ -2,24 +2,9 @@
 pairs by hand, and a record never stale nor missing."""
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
+from conftest import NoGit, write_result
 from volsmpl.report import build as report
 from volsmpl.report.previous import previous_table
-
-
-class NoGit:
-    available, reason = False, "no git in this test"
-
-    def head(self):
-        return None
-
-
-def write(path: Path, data) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data))
-    return path
 
 
 def selfpen(collidable: float, left: int, ms: float, commit: str) -> dict:
@@ -51,11 +36,11 @@ def test_an_eval_record_by_split_in_percent():
 
 
 def test_a_record_is_shown_never_stale_nor_missing(tmp_path):
-    write(tmp_path / "docs" / "selfpen" / "results.json", selfpen(1.25, 1, 52.5, "new"))
+    write_result(tmp_path / "docs" / "selfpen" / "results.json", selfpen(1.25, 1, 52.5, "new"))
     text, status = report.build_report(tmp_path / "r.md", root=tmp_path, git=NoGit())
     assert "Before and after" not in text                           # no record yet: nothing claimed
     assert "selfpen_previous" not in text and "selfpen_previous" not in sum(status.values(), [])
-    write(tmp_path / "docs" / "selfpen" / "results_previous.json", selfpen(10.5, 3, 45.0, "old"))
+    write_result(tmp_path / "docs" / "selfpen" / "results_previous.json", selfpen(10.5, 3, 45.0, "old"))
     text, status = report.build_report(tmp_path / "r.md", root=tmp_path, git=NoGit())
     sec = text[text.index("## Self-intersection repair"):]
     assert "| volsmpl | 10.50 -> 1.25 | 3 -> 1 | 200 -> 200 | 45.00 -> 52.50 |" in sec

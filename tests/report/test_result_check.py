@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import producer_repo
+from conftest import producer_repo, write_result
 from volsmpl.report import build as report
 from volsmpl.cli import main
 from volsmpl.report.result_check import case_leaves, check_path, compare_results, write_check
@@ -77,17 +77,13 @@ def test_a_value_only_the_fresh_run_records_is_listed_and_one_it_lacks_is_a_mism
                                   "fresh": "<absent>"}
 
 
-def write(path: Path, data) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(data))
-    return path
 
 
 @pytest.fixture
 def repo(tmp_path):
     """A hoi result made at `made`; the producer changes at `later` (a change that cannot touch its numbers)."""
     made, later = producer_repo(tmp_path)
-    stored = write(tmp_path / "docs" / "hoi" / "results.json", dict(STORED, meta={"git_commit": made}))
+    stored = write_result(tmp_path / "docs" / "hoi" / "results.json", dict(STORED, meta={"git_commit": made}))
     return tmp_path, stored, made, later
 
 
@@ -100,16 +96,16 @@ def _verdict(root: Path, stored: Path) -> tuple[str, str]:
 def test_report_takes_an_agreeing_check_at_or_after_the_change_and_nothing_else(repo):
     root, stored, made, later = repo
     assert _verdict(root, stored)[0] == "stale"
-    fresh = write(root / "out" / "fresh.json", dict(fresh_of("a"), meta={"git_commit": later}))
+    fresh = write_result(root / "out" / "fresh.json", dict(fresh_of("a"), meta={"git_commit": later}))
     write_check(stored, fresh)
     verdict, line = _verdict(root, stored)
     assert verdict == "current" and "re-run check at" in line and "2 of 4 cases" in line
     # a check made before the change does not count
-    write_check(stored, write(root / "out" / "old.json", dict(fresh_of("a"), meta={"git_commit": made})))
+    write_check(stored, write_result(root / "out" / "old.json", dict(fresh_of("a"), meta={"git_commit": made})))
     verdict, line = _verdict(root, stored)
     assert verdict == "stale" and "predates" in line
     # a disagreeing check keeps it stale and says where
-    write_check(stored, write(root / "out" / "bad.json", dict(fresh_of("a", **{"mesh/a": 9.0}),
+    write_check(stored, write_result(root / "out" / "bad.json", dict(fresh_of("a", **{"mesh/a": 9.0}),
                                                               meta={"git_commit": later})))
     verdict, line = _verdict(root, stored)
     assert verdict == "stale" and "disagrees on 1 values" in line and "model=mesh|name=a" in line
@@ -122,7 +118,7 @@ def test_report_takes_an_agreeing_check_at_or_after_the_change_and_nothing_else(
 def test_cli_verify_writes_the_check_and_refuses_bad_input(repo, monkeypatch, capsys):
     root, stored, made, later = repo
     monkeypatch.setattr(report, "ROOT", root)
-    fresh = write(root / "out" / "fresh.json", dict(fresh_of("b"), meta={"git_commit": later}))
+    fresh = write_result(root / "out" / "fresh.json", dict(fresh_of("b"), meta={"git_commit": later}))
     out = root / "docs" / "report.md"
     assert main(["report", "--out", str(out), "--verify", f"hoi={fresh}"]) == 0
     assert "2 of 4 cases compared, 10 values, all agree" in capsys.readouterr().out
@@ -130,7 +126,7 @@ def test_cli_verify_writes_the_check_and_refuses_bad_input(repo, monkeypatch, ca
     assert main(["report", "--out", str(out), "--verify", f"nosuch={fresh}"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "--verify nosuch: unknown result name" in err
-    other = write(root / "out" / "other.json", {"cases": {"volsmpl": [rec("zzz", "volsmpl", 1.0, 1.0)]}})
+    other = write_result(root / "out" / "other.json", {"cases": {"volsmpl": [rec("zzz", "volsmpl", 1.0, 1.0)]}})
     assert main(["report", "--out", str(out), "--verify", f"hoi={other}"]) == 2
     assert "shares no case" in capsys.readouterr().err
     assert main(["report", "--out", str(out), "--verify", f"selfpen={fresh}"]) == 2
@@ -148,7 +144,7 @@ def test_chained_check_ties_new_code_to_the_table_through_code_checked_on_its_ma
     out = root / "docs" / "report.md"
     m1 = {"cpu": "AMD EPYC", "platform": "Linux-a"}
     m2 = {"cpu": "Intel Xeon", "platform": "Linux-b"}
-    run = lambda name, commit, machine, **change: write(  # noqa: E731
+    run = lambda name, commit, machine, **change: write_result(  # noqa: E731
         root / "out" / f"{name}.json", dict(fresh_of("a", **change), meta={"git_commit": commit, **machine}))
     cli = lambda *a: (main(["report", "--out", str(out), *a]), capsys.readouterr())  # noqa: E731
     base = run("base", made, m2, **{"mesh/a": 9.0})
