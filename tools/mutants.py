@@ -183,7 +183,7 @@ MUTANTS = {
     "cache_serves_graph_free_encoding": ("core/volume/encoding.py", "if found is not None and not found.graph and torch.is_grad_enabled()",
                                          "if False and not found.graph and torch.is_grad_enabled()",
                                          [T + "volume/test_encoding.py::test_encoding_made_without_graph_is_not_served_to_a_gradient"]),
-    "selfpen_cached_codes_keep_graph": ("core/volume/learned.py", "        elif not code_grad:\n", "        elif False:\n",
+    "selfpen_cached_codes_keep_graph": ("core/volume/learned_selfpen.py", "        elif not code_grad:\n", "        elif False:\n",
                                         [T + "volume/test_learned.py::test_selfpen_rigid_code_gradient"]),
     "float64_body_float32_volume": ("core/volume/attach.py", "return dtype if dtype is not None and dtype.is_floating_point else None",
                                     "return None", [T + "volume/test_learned.py::test_attach_to_a_float64_body_gives_a_float64_volume"]),

@@ -26,12 +26,12 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import os
-import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
 from volsmpl.report import sections as rs
+from volsmpl.report.git import Git
 from volsmpl.report.previous import HEADLINES, previous_table
 from volsmpl.report.import_closure import producer_closure
 from volsmpl.io.outputs import check_writable, write_atomic
@@ -137,54 +137,6 @@ _EVAL_LABELS = {"eval_volsmpl": "VolumetricSMPL", "eval_coap": "COAP"}
 
 def result_names(sections: dict | None = None) -> list[str]:
     return [r for s in (sections or SECTIONS).values() for r in s.results]
-
-
-# -------------------------------------------------------------------------------------------------------------- git
-
-class Git:
-    """The few git queries the report needs, in `root`. available is False (reason says why) without git."""
-
-    def __init__(self, root: Path):
-        self.root = Path(root)
-        try:
-            p = subprocess.run(["git", "-C", str(self.root), "rev-parse", "--show-toplevel"], capture_output=True,
-                               text=True, timeout=30)
-            self.available = p.returncode == 0
-            self.reason = "" if self.available else (p.stderr.strip().splitlines() or ["not a git repository"])[-1]
-        except (OSError, subprocess.SubprocessError) as e:
-            self.available, self.reason = False, f"git cannot run ({e.__class__.__name__}: {e})"
-
-    def _out(self, *args) -> str | None:
-        if not self.available:
-            return None
-        try:
-            p = subprocess.run(["git", "-C", str(self.root), *args], capture_output=True, text=True, timeout=60)
-        except (OSError, subprocess.SubprocessError):
-            return None
-        return p.stdout.strip() if p.returncode == 0 else None
-
-    def last_change(self, paths, since: str | None = None) -> tuple[str, int, str] | None:
-        """(short sha, commit time, subject) of the last commit touching paths (after `since` if given)."""
-        rng = [f"{since}..HEAD"] if since else []
-        out = self._out("log", "-1", "--format=%h %ct %s", *rng, "--", *paths)
-        if not out:
-            return None
-        sha, ct, subject = (out.split(" ", 2) + [""])[:3]
-        return sha, int(ct), (subject if len(subject) <= 90 else subject[:87] + "...")
-
-    def changed_files(self, since: str, paths) -> list[str]:
-        """Files among paths that differ between commit `since` and HEAD."""
-        return (self._out("diff", "--name-only", f"{since}..HEAD", "--", *paths) or "").split()
-
-    def commit_time(self, rev: str) -> int | None:
-        out = self._out("show", "-s", "--format=%ct", f"{rev}^{{commit}}")
-        return int(out) if out and out.isdigit() else None
-
-    def dirty(self, paths) -> bool:
-        return bool(self._out("status", "--porcelain", "--", *paths))
-
-    def head(self) -> str | None:
-        return self._out("rev-parse", "--short", "HEAD")
 
 
 # ------------------------------------------------------------------------------------------------------ provenance
