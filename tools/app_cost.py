@@ -1,7 +1,8 @@
-"""Each app's time per iteration with each candidate VolumetricSMPL setting, beside the shipped model's.
+"""Each app's time per iteration with each candidate VolumetricSMPL setting, beside a base setting's.
 
     python tools/app_cost.py --rounds 3 --threads 1 --out docs/app_cost.json
     python tools/app_cost.py --apps hoi,selfpen --settings shipped,r3 --rounds 1 --out /tmp/cost.json
+    python tools/app_cost.py --settings shipped,r3 --base r3 --out /tmp/cost.json    # ratios to r3's times
 
 The cost that matters for a model or a refinement setting is an app's whole iteration, not the volume's share of it
 (docs/learned_refinement.md, "Cost"): hoi encodes the body once per fit, selfpen and motion re-encode at every step,
@@ -16,7 +17,8 @@ fixed workload, VolumetricSMPL only, with the app's own timer:
   corrections across the fit's iterations (`--pass-every`, `--refine-warm`) shows what it saves only in `ms_per_iter`;
 - egohmr: 4 test frames with the tuned guidance: `s_per_frame`.
 Round after round, every setting runs each app in turn, so that a change of machine load falls on all settings
-alike; per (app, setting) the median over rounds, and its ratio to the shipped model's.
+alike; per (app, setting) the median over rounds, and its ratio to the base setting's (`--base`, one of the settings
+run; default 'shipped').
 """
 from __future__ import annotations
 
@@ -96,6 +98,7 @@ def main() -> int:
     p.add_argument("--settings", default=",".join(SETTINGS))
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--base", default="shipped", help="the setting whose times the ratios divide by (one of --settings)")
     p.add_argument("--out", default="docs/app_cost.json")
     args = p.parse_args()
     apps, settings = args.apps.split(","), args.settings.split(",")
@@ -103,6 +106,9 @@ def main() -> int:
         bad = [x for x in given if x not in known]
         if bad:
             raise SystemExit(f"app_cost: unknown {name} {bad[0]!r}; choose from {', '.join(known)}")
+    if args.base not in settings:
+        raise SystemExit(f"app_cost: --base {args.base!r} is not among --settings ({args.settings}); add it there "
+                         f"or choose one of them")
     for flag, value in (("--rounds", args.rounds), ("--threads", args.threads)):
         if value < 1:
             raise SystemExit(f"app_cost: {flag} {value}: give a number >= 1")
@@ -118,19 +124,17 @@ def main() -> int:
                     print(f"round {r} {a:8s} {s:14s} {t:9.3f} {APPS[a][2]} ({wall:.0f} s)", flush=True)
             rounds.append(row)
     median = {a: {s: float(np.median([row[a][s][APPS[a][1][0]] for row in rounds])) for s in settings} for a in apps}
-    ratio = ({a: {s: median[a][s] / median[a]["shipped"] for s in settings} for a in apps}
-             if "shipped" in settings else None)
+    ratio = {a: {s: median[a][s] / median[a][args.base] for s in settings} for a in apps}
     result = {"command": "python tools/app_cost.py " + " ".join(
                   f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items()),
               "settings": {s: SETTINGS[s] for s in settings},
               "checkpoints": {s: checkpoint_of(s) for s in settings},
               "workloads": {a: {"command": APPS[a][0], "reads": APPS[a][1], "unit": APPS[a][2]} for a in apps},
-              "median": median, "ratio_to_shipped": ratio, "rounds": rounds,
+              "median": median, "base": args.base, "ratio_to_base": ratio, "rounds": rounds,
               "meta": machine_info("cpu", args.threads)}
     write_atomic(Path(args.out), json.dumps(result, indent=1))
     for a in apps:
-        print(f"{a:8s} " + "  ".join(f"{s} {median[a][s]:.3f}" + (f" ({ratio[a][s]:.2f}x)" if ratio else "")
-                                     for s in settings))
+        print(f"{a:8s} " + "  ".join(f"{s} {median[a][s]:.3f} ({ratio[a][s]:.2f}x)" for s in settings))
     return 0
 
 

@@ -3,12 +3,14 @@
 #
 #     bash tools/motion_assemble.sh            # refuses while sequences are missing (it would compute them)
 #     bash tools/motion_assemble.sh --force    # assemble anyway (the missing ones are computed now: hours)
+#     MOTION_COMMIT=abc1234 bash tools/motion_assemble.sh --force   # a new table from another commit's export
 #
-# The table runs from an export of fea400e (tools/export_snapshot.sh): per-sequence records are keyed by the code
-# that made them, so the assembly runs from the same export and reuses every record (the 440 records of the table
-# are tracked in docs/motion/cases/). Then:
+# The table runs from an export of MOTION_COMMIT (default fea400e, the commit of docs/motion/results.json;
+# tools/export_snapshot.sh): per-sequence records are keyed by the code that made them, so the assembly runs from
+# the same export and reuses every record (the 440 records of the table are tracked in docs/motion/cases/; a run
+# interrupted part way continues from OUT/cases/ with --resume: about 20 h of one CPU thread for all 440). Then:
 #   1. results.json and the figures from the export (all records reused; COAP as published measured once), copied
-#      to docs/motion/;
+#      to docs/motion/, and the records to docs/motion/cases/ (replacing those of another commit);
 #   2. the chained re-run check (volsmpl.report.result_check.chain_check): two sequences of rooms 0 and 1 (COAP at w = 0.1,
 #      VolumetricSMPL, the mesh), made here by the export (the table's own code) and by the current code, compared
 #      (VERIFY_TOL=1e-5 in the environment for code whose backward pass sums in another order: README, "Results say").
@@ -27,15 +29,20 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 V="$(pwd)/.venv/bin/volsmpl"
-SNAP=/tmp/snap_motion
-OUT=out/motion_tuned
+COMMIT=$(git rev-parse --short "${MOTION_COMMIT:-fea400e}")
+SNAP=/tmp/snap_motion_$COMMIT
+OUT=out/motion_$COMMIT
 EXPECTED=440   # 15 rooms x 8 pairs for VolumetricSMPL and mesh, COAP's sweep on 5 tuning rooms and its choice on 10
 TABLE=(--protocol tuned --scenes all --sequences 8 --frames 80 --iters 100 --threads 1)
 CHECK=(--scenes 2 --sequences 2 --w coap=0.1 --frames 80 --iters 1 --threads 1 --render 0)
 
-[ -d "$SNAP/volsmpl" ] || tools/export_snapshot.sh "$SNAP" fea400e
+[ -d "$SNAP/volsmpl" ] || tools/export_snapshot.sh "$SNAP" "$COMMIT"
 mkdir -p "$OUT/cases"
-cp -n docs/motion/cases/*.json "$OUT/cases/" 2>/dev/null || true
+# the tracked records serve only a table of the same commit (another commit's keys would not match)
+MADE=$(python3 -c "import json; print(json.load(open('docs/motion/results.json'))['meta']['git_commit'])" 2>/dev/null || true)
+if [ -n "$MADE" ] && [ "$(git rev-parse --short "$MADE")" = "$COMMIT" ]; then
+    cp -n docs/motion/cases/*.json "$OUT/cases/" 2>/dev/null || true
+fi
 have=$(ls "$OUT/cases" | wc -l)
 if [ "$have" -lt "$EXPECTED" ] && [ "${1:-}" != "--force" ]; then
     echo "motion_assemble: $have of $EXPECTED sequences stored in $OUT/cases; let the table's processes finish" \
@@ -47,6 +54,8 @@ echo "== 1. the table from the export"
 PYTHONPATH="$SNAP" "$V" motion --model volsmpl,coap,mesh "${TABLE[@]}" --published-cost --resume --out "$OUT"
 mkdir -p docs/motion
 cp "$OUT/results.json" "$OUT"/*.png docs/motion/
+rm -f docs/motion/cases/*.json
+cp "$OUT"/cases/*.json docs/motion/cases/
 
 echo "== 2. chained re-run check: the export and the current code, two sequences of two rooms, one Adam step, this machine"
 PYTHONPATH="$SNAP" "$V" motion --model volsmpl,coap,mesh "${CHECK[@]}" --out out/motion_check_base

@@ -231,10 +231,13 @@ def eval_section(ctx) -> list[str]:
 
 
 def app_cost_section(ctx) -> list[str]:
-    """Each app's time per iteration with each VolumetricSMPL setting, and its ratio to the shipped model's, from
-    `tools/app_cost.py` (result 'app_cost'): the cost of a model or refinement setting as an app meets it."""
+    """Each app's time per iteration with each VolumetricSMPL setting, and its ratio to the base setting's (the
+    result's `base`; files without one hold `ratio_to_shipped`), from `tools/app_cost.py` (result 'app_cost'): the
+    cost of a model or refinement setting as an app meets it."""
     d = ctx["results"].get("app_cost") or {}
-    med, ratio, work = d.get("median") or {}, d.get("ratio_to_shipped") or {}, d.get("workloads") or {}
+    base = d.get("base", "shipped")
+    med, work = d.get("median") or {}, d.get("workloads") or {}
+    ratio = d.get("ratio_to_base", d.get("ratio_to_shipped")) or {}
     settings = list(d.get("settings") or {})
     header = ["setting"] + [f"{a} [{(work.get(a) or {}).get('unit', '?')}]" for a in med]
     rows = []
@@ -246,7 +249,7 @@ def app_cost_section(ctx) -> list[str]:
         rows.append([f"`{s}`"] + cells)
     meta = d.get("meta") or {}
     lines = [f"Time per iteration of VolumetricSMPL in each app, the median of {len(d.get('rounds') or [])} rounds "
-             f"(each round runs every setting in turn), and its ratio to the shipped model's; "
+             f"(each round runs every setting in turn), and its ratio to `{base}`'s; "
              f"{fmt(meta.get('threads'))} thread on {meta.get('cpu', 'a CPU not recorded')}.", ""]
     lines += md_table(header, rows) + [""]
     lines += [f"- `{s}`: " + (" ".join(f) if f else "the shipped model, no flags")

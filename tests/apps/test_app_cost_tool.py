@@ -35,9 +35,21 @@ def test_medians_over_rounds_and_ratios_to_the_shipped_model(tmp_path, monkeypat
     assert res["median"]["selfpen"] == {"shipped": 20.0, "r3": 35.0}
     assert res["median"]["motion"] == {"shipped": 20.0, "r3": 35.0}        # the first key read is tabulated
     assert res["rounds"][1]["motion"]["r3"] == {"ms_per_frame_fwdbwd": 60.0, "ms_per_iter": 120.0}
-    assert res["ratio_to_shipped"]["selfpen"]["r3"] == pytest.approx(1.75)
+    assert res["base"] == "shipped" and res["ratio_to_base"]["selfpen"]["r3"] == pytest.approx(1.75)
     assert res["checkpoints"] == {"shipped": "core/assets/volsmpl_anny",
                                   "r3": "checkpoints/volsmpl_r3/ckpt-00057000/model"}
+
+
+def test_the_ratios_divide_by_the_base_setting(tmp_path, monkeypatch):
+    # shipped 20 ms, r3 50 ms in every round: --base r3 gives shipped 0.4x, r3 1x
+    monkeypatch.setattr(tool, "run_one", lambda app, setting, threads, workdir: (
+        {k: {"shipped": 20.0, "r3": 50.0}[setting] for k in tool.APPS[app][1]}, 0.0))
+    out = tmp_path / "cost.json"
+    assert run(monkeypatch, "--apps", "selfpen", "--settings", "shipped,r3", "--rounds", "1", "--base", "r3",
+               "--out", str(out)) == 0
+    res = json.loads(out.read_text())
+    assert res["base"] == "r3"
+    assert res["ratio_to_base"]["selfpen"] == {"shipped": pytest.approx(0.4), "r3": pytest.approx(1.0)}
 
 
 def test_unknown_apps_and_settings_are_refused_in_one_line(tmp_path, monkeypatch):
@@ -45,6 +57,8 @@ def test_unknown_apps_and_settings_are_refused_in_one_line(tmp_path, monkeypatch
         run(monkeypatch, "--apps", "hoii", "--out", str(tmp_path / "x.json"))
     with pytest.raises(SystemExit, match="unknown setting 'r9'"):
         run(monkeypatch, "--settings", "shipped,r9", "--out", str(tmp_path / "x.json"))
+    with pytest.raises(SystemExit, match="--base 'r3' is not among --settings"):
+        run(monkeypatch, "--settings", "shipped,r1", "--base", "r3", "--out", str(tmp_path / "x.json"))
     with pytest.raises(SystemExit, match="--rounds 0: give a number >= 1"):
         run(monkeypatch, "--rounds", "0", "--out", str(tmp_path / "x.json"))
     with pytest.raises(SystemExit, match="--threads -1: give a number >= 1"):
