@@ -312,7 +312,7 @@ def _train(cfg: TrainConfig, out_dir: Path, rank: int, world: int, resume: bool,
         _truncate_profile(out_dir / "profile.jsonl", start)
     new_log = rank == 0 and not log_path.exists()
     logf = open(log_path, "a", newline="") if rank == 0 else None
-    writer = csv.writer(logf) if logf else None
+    writer = csv.writer(logf, lineterminator="\n") if logf else None  # the ends a truncation keeps
     if new_log:
         writer.writerow(LOG_HEADER)
     t0, losses, last = time.time(), [], {}

@@ -195,6 +195,7 @@ def test_resume_drops_log_rows_past_the_checkpoint(tmp_path):
     train(cfg, tmp_path / "a", resume=True, max_steps=2, quiet=True)
     steps = [int(ln.split(",")[0]) for ln in log.read_text().splitlines()[1:]]
     assert steps == [1, 2, 3, 4]
+    assert b"\r" not in log.read_bytes()   # one line end throughout: the resumed run's rows as the kept ones
 
 
 def test_time_budget_is_cumulative_over_resumes(tmp_path):
