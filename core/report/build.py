@@ -63,8 +63,10 @@ class Section:
 
 
 _CKPTS = ("core/assets/volsmpl_anny.safetensors", "core/assets/coap_anny.safetensors")
-#: the committed model with learned code refinement (docs/learned_refinement.md) and the model it refines
+#: the shipped model's training checkpoint (learned code refinement, docs/learned_refinement.md), the model its
+#: passes refine, the one-pass model, and the model shipped before it (tools/app_cost.py's base)
 _REFINER = "checkpoints/volsmpl_r3/ckpt-00057000/model"
+_S33000 = "checkpoints/volsmpl_s33000/model"
 _BASE = "checkpoints/volsmpl_b8q/ckpt-00050000/model"
 _R1 = "checkpoints/volsmpl_r1/ckpt-00053000/model"
 #: the default body's data: every result poses it
@@ -90,20 +92,19 @@ SECTIONS: dict[str, Section] = {
         "Volumetric bodies: accuracy", ("1",),
         ("core/evaluation", "docs/scripts/refiner_cost.py"),
         {"eval_volsmpl": "docs/eval_volsmpl_anny.json", "eval_coap": "docs/eval_coap_anny.json",
-         "eval_refiner": "docs/eval_volsmpl_refiner.json", "refiner_cost": "docs/refiner_cost.json"},
+         "refiner_cost": "docs/refiner_cost.json"},
         {"eval_volsmpl": "volsmpl eval --out docs/eval_volsmpl_anny.json",
          "eval_coap": "volsmpl eval --checkpoint core/assets/coap_anny --out docs/eval_coap_anny.json",
-         "eval_refiner": f"volsmpl eval --checkpoint {_REFINER} --out docs/eval_volsmpl_refiner.json",
          "refiner_cost": f"python docs/scripts/refiner_cost.py --checkpoint {_BASE} {_R1} {_REFINER} "
                          f"--refine-steps 0 1 --out docs/refiner_cost.json"},
-        rs.eval_section, ("docs/surfaces.png", "docs/sdf_slice.png"), _CKPTS + (_REFINER + ".safetensors",),
+        rs.eval_section, ("docs/surfaces.png", "docs/sdf_slice.png"), _CKPTS,
         (("eval_volsmpl_previous", "eval_volsmpl", "docs/eval_volsmpl_previous.json"),
          ("eval_coap_previous", "eval_coap", "docs/eval_coap_previous.json"))),
     "app_cost": Section(
         "Volumetric bodies: cost in the apps", ("3", "4", "5", "6"), ("apps", "tools/app_cost.py"),
         {"app_cost": "docs/app_cost.json"},
         {"app_cost": "python tools/app_cost.py --rounds 3 --threads 1 --out docs/app_cost.json"},
-        rs.app_cost_section, (), _CKPTS + tuple(c + ".safetensors" for c in (_BASE, _R1, _REFINER))),
+        rs.app_cost_section, (), _CKPTS + tuple(c + ".safetensors" for c in (_S33000, _BASE, _R1, _REFINER))),
     "bench": Section(
         "Volumetric bodies: time and memory; winding numbers", ("1", "C.4"),
         ("core/bench", "core/runtime/meter.py"),

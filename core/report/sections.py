@@ -205,14 +205,6 @@ def eval_section(ctx) -> list[str]:
         rows.append([f"paper: {t['row_labels'][backend]}"] + [fmt_paper(t["rows"][backend][k]) for k, _ in cols]
                     + ["-"])
     rows.append([f"paper: {t['row_labels']['leap']}"] + [fmt_paper(t["rows"]["leap"][k]) for k, _ in cols] + ["-"])
-    d = ctx["results"].get("eval_refiner")
-    if d is not None:   # a checkpoint beyond the paper: its encoder's codes corrected by learned passes
-        m = d.get("metrics") or {}
-        ck = get_path(d, "extra.checkpoint")
-        rows.insert(1, [f"ours: VolumetricSMPL + learned code refinement ({ck})"]
-                    + [fmt(None if m.get(k) is None else m[k] * s) for k, s in cols] + [fmt(m.get("mse_sdf_surf"))])
-        lines.append(f"- VolumetricSMPL + learned code refinement (docs/learned_refinement.md): the checkpoint {ck}, not "
-                     f"shipped; same bodies, points and ground truth as the shipped model's row.")
     cost = ctx["results"].get("refiner_cost")
     if cost is not None:
         by = {}

@@ -28,7 +28,7 @@ def test_medians_over_rounds_and_ratios_to_the_shipped_model(tmp_path, monkeypat
 
     monkeypatch.setattr(tool, "run_one", fake)
     out = tmp_path / "cost.json"
-    argv = ["--apps", "selfpen,motion", "--settings", "shipped,r3", "--rounds", "3", "--out", str(out)]
+    argv = ["--apps", "selfpen,motion", "--settings", "shipped,r3", "--rounds", "3", "--base", "shipped", "--out", str(out)]
     assert run(monkeypatch, *argv) == 0
     res = json.loads(out.read_text())
     assert calls[:4] == [("selfpen", "shipped"), ("selfpen", "r3"), ("motion", "shipped"), ("motion", "r3")]
@@ -59,6 +59,8 @@ def test_unknown_apps_and_settings_are_refused_in_one_line(tmp_path, monkeypatch
         run(monkeypatch, "--settings", "shipped,r9", "--out", str(tmp_path / "x.json"))
     with pytest.raises(SystemExit, match="--base 'r3' is not among --settings"):
         run(monkeypatch, "--settings", "shipped,r1", "--base", "r3", "--out", str(tmp_path / "x.json"))
+    with pytest.raises(SystemExit, match="--base 's33000' is not among --settings"):
+        run(monkeypatch, "--settings", "shipped,r1", "--out", str(tmp_path / "x.json"))
     with pytest.raises(SystemExit, match="--rounds 0: give a number >= 1"):
         run(monkeypatch, "--rounds", "0", "--out", str(tmp_path / "x.json"))
     with pytest.raises(SystemExit, match="--threads -1: give a number >= 1"):
