@@ -5,7 +5,7 @@
 #     bash tools/motion_assemble.sh --force    # assemble anyway (the missing ones are computed now: hours)
 #     MOTION_COMMIT=abc1234 bash tools/motion_assemble.sh --force   # a new table from another commit's export
 #
-# The table runs from an export of MOTION_COMMIT (default fea400e, the commit of docs/motion/results.json;
+# The table runs from an export of MOTION_COMMIT (default ce58bf3, the commit of the shipped models' table;
 # tools/export_snapshot.sh): per-sequence records are keyed by the code that made them, so the assembly runs from
 # the same export and reuses every record (the 440 records of the table are tracked in docs/motion/cases/; a run
 # interrupted part way continues from OUT/cases/ with --resume: about 20 h of one CPU thread for all 440). Then:
@@ -29,11 +29,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 V="$(pwd)/.venv/bin/volsmpl"
-COMMIT=$(git rev-parse --short "${MOTION_COMMIT:-fea400e}")
+COMMIT=$(git rev-parse --short "${MOTION_COMMIT:-ce58bf3}")
 SNAP=/tmp/snap_motion_$COMMIT
 OUT=out/motion_$COMMIT
 EXPECTED=440   # 15 rooms x 8 pairs for VolumetricSMPL and mesh, COAP's sweep on 5 tuning rooms and its choice on 10
-TABLE=(--protocol tuned --scenes all --sequences 8 --frames 80 --iters 100 --threads 1)
+TABLE=(--scenes all --sequences 8 --frames 80 --iters 100 --threads 1)   # with the action tune
 CHECK=(--scenes 2 --sequences 2 --w coap=0.1 --frames 80 --iters 1 --threads 1 --render 0)
 
 [ -d "$SNAP/volsmpl" ] || tools/export_snapshot.sh "$SNAP" "$COMMIT"
@@ -51,7 +51,7 @@ if [ "$have" -lt "$EXPECTED" ] && [ "${1:-}" != "--force" ]; then
 fi
 
 echo "== 1. the table from the export"
-PYTHONPATH="$SNAP" "$V" motion --model volsmpl,coap,mesh "${TABLE[@]}" --published-cost --resume --out "$OUT"
+PYTHONPATH="$SNAP" "$V" motion tune --model volsmpl,coap,mesh "${TABLE[@]}" --published-cost --resume --out "$OUT"
 mkdir -p docs/motion
 cp "$OUT/results.json" "$OUT"/*.png docs/motion/
 rm -f docs/motion/cases/*.json
