@@ -66,9 +66,9 @@ _CKPTS = ("core/assets/volsmpl_anny.safetensors", "core/assets/coap_anny.safeten
 #: the shipped model's training checkpoint (learned code refinement, docs/learned_refinement.md), the model its
 #: passes refine, the one-pass model, and the model shipped before it (tools/app_cost.py's base)
 _REFINER = "checkpoints/volsmpl_r3/ckpt-00057000/model"
-_S33000 = "checkpoints/volsmpl_s33000/model"
 _BASE = "checkpoints/volsmpl_b8q/ckpt-00050000/model"
 _R1 = "checkpoints/volsmpl_r1/ckpt-00053000/model"
+_S33000 = "checkpoints/volsmpl_s33000/model"
 #: the default body's data: every result poses it
 _BODY_DATA = ("core/assets/anny_body.json", "core/assets/anny_shapes.npz", "core/assets/anny_smpl_neutral.npz",
               "core/assets/anny_smplx_neutral.npz")
