@@ -5,7 +5,7 @@ The paper's values (lr 1e-5, pose-prior weight 1e3, self-penetration weight 0.1)
 COAP's SMPL-X code; with plain SGD only the products lr * w_selfpen and lr * w_prior matter, and
 the prior step is stable only for lr * w_prior < 1. The default grid keeps the paper's
 lr * w_prior = 1e-2 (lr 1e-2, w_prior 1) and raises the paper's lr * w_selfpen = 1e-6, which does
-not move our bodies, to 1e-3 .. 0.3 (w_selfpen 0.1 .. 30), with VolumetricSMPL's SDF read in
+not move our bodies, to 1e-3 .. 1 (w_selfpen 0.1 .. 100), with VolumetricSMPL's SDF read in
 centimetres (tau 1 cm, Volume.selfpen_loss) so that both models' losses have the same scale, and
 every step limited to 0.1 rad per joint (SelfPenConfig.max_step); the other settings are the tuned preset's. Each grid point repairs the same
 cases with each model; the table gives, per model and grid point, the mean fraction of triangle
@@ -31,7 +31,7 @@ from .optimize import SelfPenConfig, repair_case, summarize
 
 # default grid: learning rate and the two weights (w_selfpen, w_prior); module docstring
 GRID_LR = (1e-2,)
-GRID_W_SELFPEN = (0.1, 0.3, 1.0, 3.0, 10.0, 30.0)
+GRID_W_SELFPEN = (0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)
 GRID_W_PRIOR = (1.0,)
 
 
