@@ -4,6 +4,7 @@ from __future__ import annotations
 import functools
 import json
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -378,12 +379,19 @@ def test_presets():
     p = SelfPenConfig.preset("paper")
     assert (p.lr, p.w_selfpen, p.w_prior, p.stop_checks, p.tau, p.patience) == (1e-5, 0.1, 1e3, 1, 1.0, 0)
     t = SelfPenConfig()
-    assert (t.lr, t.w_selfpen, t.w_prior, t.stop_checks, t.tau, t.patience, t.code_grad, t.stall_rtol, t.max_step) == (1e-2, 3.0, 1.0, 3, 0.01, 10, False, 0.1, 0.1)
+    assert (t.lr, t.w_selfpen, t.w_prior, t.stop_checks, t.tau, t.patience, t.code_grad, t.stall_rtol, t.max_step) == (1e-2, 30.0, 1.0, 3, 0.01, 10, False, 0.1, 0.1)
     assert p.code_grad
     assert t.lr * t.w_prior == pytest.approx(p.lr * p.w_prior)  # the tuning kept the paper's prior step
     assert SelfPenConfig.preset("paper", lr=1e-3).lr == 1e-3
     with pytest.raises(ValueError, match="unknown preset 'fast'"):
         SelfPenConfig.preset("fast")
+
+
+def test_tuned_preset_is_the_tuning_runs_best():
+    # the preset is what the tracked tuning run chose (apps/selfpen/tune.py's rule), not a value of its own
+    best = json.loads((Path(__file__).parents[3] / "docs" / "selfpen" / "tune.json").read_text())["best"]
+    t = SelfPenConfig()
+    assert {k: getattr(t, k) for k in best} == best
 
 
 def test_summary_removed_per_second_by_hand():
