@@ -16,11 +16,10 @@
 # Then `volsmpl report`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-STAGES=("$@"); [ ${#STAGES[@]} -gt 0 ] || STAGES=(selfpen_tune selfpen selfpen_seeds egohmr_tune egohmr hoi)
+ALL=(selfpen_tune selfpen selfpen_seeds egohmr_tune egohmr hoi)
+STAGES=("$@"); [ ${#STAGES[@]} -gt 0 ] || STAGES=("${ALL[@]}")
 for s in "${STAGES[@]}"; do
-  case "$s" in selfpen_tune|selfpen|selfpen_seeds|egohmr_tune|egohmr|hoi|publish) ;;
-    *) echo "app_tables: unknown stage '$s' (selfpen_tune selfpen selfpen_seeds egohmr_tune egohmr hoi publish)" >&2
-       exit 2 ;; esac
+  [[ " ${ALL[*]} publish " == *" $s "* ]] || { echo "app_tables: unknown stage '$s' (${ALL[*]} publish)" >&2; exit 2; }
 done
 COMMIT=$(git rev-parse --short "${COMMIT:-HEAD}")
 SNAP=/tmp/snap_tables_$COMMIT
