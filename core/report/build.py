@@ -95,7 +95,7 @@ SECTIONS: dict[str, Section] = {
          "refiner_cost": "docs/refiner_cost.json"},
         {"eval_volsmpl": "volsmpl eval --out docs/eval_volsmpl_anny.json",
          "eval_coap": "volsmpl eval --checkpoint core/assets/coap_anny --out docs/eval_coap_anny.json",
-         "refiner_cost": f"python docs/scripts/refiner_cost.py --checkpoint {_BASE} {_R1} {_REFINER} "
+         "refiner_cost": f"python docs/scripts/refiner_cost.py --checkpoint {_S33000} {_BASE} {_R1} {_REFINER} "
                          f"--refine-steps 0 1 --out docs/refiner_cost.json"},
         rs.eval_section, ("docs/surfaces.png", "docs/sdf_slice.png"), _CKPTS,
         (("eval_volsmpl_previous", "eval_volsmpl", "docs/eval_volsmpl_previous.json"),

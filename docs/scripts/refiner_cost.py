@@ -15,11 +15,13 @@ step per optimisation step costs (docs/code_refinement.md). Run it on a quiet ma
 import argparse
 import json
 import statistics
+import sys
 import time
 
 import torch
 from volsmpl.body.model import create_body
 from volsmpl.evaluation.validation_set import query_points, validation_bodies
+from volsmpl.io.provenance import machine_info
 from volsmpl.volume.attach import attach_volume
 
 
@@ -71,8 +73,9 @@ def main():
             print(json.dumps(rows[-1]), flush=True)
     if args.out:
         with open(args.out, "w") as fh:
-            json.dump({"threads": args.threads, "points": args.points, "repeats": args.repeats, "rows": rows}, fh,
-                      indent=1)
+            json.dump({"command": "python docs/scripts/refiner_cost.py " + " ".join(sys.argv[1:]),
+                       "threads": args.threads, "points": args.points, "repeats": args.repeats, "rows": rows,
+                       "meta": machine_info("cpu", args.threads)}, fh, indent=1)
 
 
 if __name__ == "__main__":
