@@ -4,6 +4,13 @@
 #     bash tools/motion_assemble.sh            # refuses while sequences are missing (it would compute them)
 #     bash tools/motion_assemble.sh --force    # assemble anyway (the missing ones are computed now: hours)
 #     MOTION_COMMIT=abc1234 bash tools/motion_assemble.sh --force   # a new table from another commit's export
+#     bash tools/motion_assemble.sh --worker mesh,volsmpl  # a helper process beside the --force one (another core)
+#
+# --worker KINDS computes the walks of these kinds only, one kind after the other, from the same export, in OUT_worker/,
+# and copies each record into OUT/cases/ (atomically, every 60 s and at the end), where the --force process reuses it
+# when it reaches that walk (--resume); it starts from the records OUT/cases/ already holds and assembles nothing.
+# COAP's walks are left to the --force process (its test rooms need the weight its tuning rooms choose). On two cores,
+# `--force` beside `--worker mesh,volsmpl` takes about half the wall time of `--force` alone.
 #
 # The table runs from an export of MOTION_COMMIT (default ce58bf3, the commit of the shipped models' table;
 # tools/export_snapshot.sh): per-sequence records are keyed by the code that made them, so the assembly runs from
@@ -36,8 +43,43 @@ EXPECTED=440   # 15 rooms x 8 pairs for VolumetricSMPL and mesh, COAP's sweep on
 TABLE=(--scenes all --sequences 8 --frames 80 --iters 100 --threads 1)   # with the action tune
 CHECK=(--scenes 2 --sequences 2 --w coap=0.1 --frames 80 --iters 1 --threads 1 --render 0)
 
+case "${1:-}" in
+    ""|--force) ;;
+    --worker)
+        KINDS="${2:-}"
+        [ -n "$KINDS" ] || { echo "motion_assemble: --worker needs the kinds, e.g. --worker mesh,volsmpl" >&2; exit 2; }
+        for k in ${KINDS//,/ }; do
+            [[ "$k" == volsmpl || "$k" == mesh ]] || { echo "motion_assemble: --worker takes volsmpl and mesh" \
+                "(COAP's test walks need its tuned weight: the --force process makes them), got '$k'" >&2; exit 2; }
+        done ;;
+    *) echo "motion_assemble: unknown argument '$1' (--force, or --worker KINDS)" >&2; exit 2 ;;
+esac
+
 [ -d "$SNAP/volsmpl" ] || tools/export_snapshot.sh "$SNAP" "$COMMIT"
 mkdir -p "$OUT/cases"
+
+if [ "${1:-}" = "--worker" ]; then
+    W="${OUT}_worker"
+    mkdir -p "$W/cases"
+    cp -n "$OUT"/cases/*.json "$W/cases/" 2>/dev/null || true
+    sync_cases() {   # the worker's new records into OUT/cases, each written whole before it appears there
+        for f in "$W"/cases/*.json; do
+            [ -e "$f" ] || continue
+            b=$(basename "$f")
+            [ -e "$OUT/cases/$b" ] || { cp "$f" "$OUT/cases/.w_$b" && mv "$OUT/cases/.w_$b" "$OUT/cases/$b"; }
+        done
+    }
+    ( while true; do sleep 60; sync_cases; done ) &
+    LOOP=$!
+    trap 'kill $LOOP 2>/dev/null || true' EXIT
+    for k in ${KINDS//,/ }; do
+        echo "== worker: the $k walks"
+        PYTHONPATH="$SNAP" "$V" motion tune --model "$k" "${TABLE[@]}" --render 0 --resume --out "$W"
+        sync_cases
+    done
+    echo "motion_assemble: worker done ($KINDS); $(ls "$OUT/cases" | wc -l) of $EXPECTED records in $OUT/cases"
+    exit 0
+fi
 # the tracked records serve only a table of the same commit (another commit's keys would not match)
 MADE=$(python3 -c "import json; print(json.load(open('docs/motion/results.json'))['meta']['git_commit'])" 2>/dev/null || true)
 if [ -n "$MADE" ] && [ "$(git rev-parse --short "$MADE")" = "$COMMIT" ]; then
