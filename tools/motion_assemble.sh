@@ -58,6 +58,12 @@ esac
 [ -d "$SNAP/volsmpl" ] || tools/export_snapshot.sh "$SNAP" "$COMMIT"
 mkdir -p "$OUT/cases"
 
+# the tracked records serve only a table of the same commit (another commit's keys would not match)
+MADE=$(python3 -c "import json; print(json.load(open('docs/motion/results.json'))['meta']['git_commit'])" 2>/dev/null || true)
+if [ -n "$MADE" ] && [ "$(git rev-parse --short "$MADE")" = "$COMMIT" ]; then
+    cp -n docs/motion/cases/*.json "$OUT/cases/" 2>/dev/null || true
+fi
+
 if [ "${1:-}" = "--worker" ]; then
     W="${OUT}_worker"
     mkdir -p "$W/cases"
@@ -79,11 +85,6 @@ if [ "${1:-}" = "--worker" ]; then
     done
     echo "motion_assemble: worker done ($KINDS); $(ls "$OUT/cases" | wc -l) of $EXPECTED records in $OUT/cases"
     exit 0
-fi
-# the tracked records serve only a table of the same commit (another commit's keys would not match)
-MADE=$(python3 -c "import json; print(json.load(open('docs/motion/results.json'))['meta']['git_commit'])" 2>/dev/null || true)
-if [ -n "$MADE" ] && [ "$(git rev-parse --short "$MADE")" = "$COMMIT" ]; then
-    cp -n docs/motion/cases/*.json "$OUT/cases/" 2>/dev/null || true
 fi
 have=$(ls "$OUT/cases" | wc -l)
 if [ "$have" -lt "$EXPECTED" ] && [ "${1:-}" != "--force" ]; then
